@@ -1,0 +1,220 @@
+"""Triangle meshes: the immutable :class:`Mesh` container and reading/writing through meshio.
+
+This is the first stage of the pipeline (mesh → spectrum → frame → coefficients → transfer →
+metrics) and depends on nothing else in bsfjax.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ._files import atomic_path
+from .errors import MeshError
+
+__all__ = ["Mesh", "MeshError", "load_mesh", "save_mesh"]
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Mesh:
+    """An immutable triangle mesh.
+
+    Attributes:
+        vertices: ``(n, 3)`` float64 coordinates (read-only array).
+        faces: ``(m, 3)`` int64 vertex indices of the triangles (read-only array).
+        vertex_ids: ``(n,)`` int64 index of each vertex in the file it was read from, or
+            ``None`` when vertex ``i`` is row ``i`` of the source.  ``load_mesh`` drops
+            unreferenced vertices; per-vertex data indexed like the file (labels, ground-truth
+            correspondences) is brought onto the mesh with ``data[mesh.vertex_ids]``.
+        name: where the mesh came from (a path), for error messages.
+
+    The constructor validates its input and raises :class:`MeshError` on NaN/inf coordinates,
+    wrong shapes, out-of-range or negative face indices and empty meshes.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    vertex_ids: np.ndarray | None = None
+    name: str | None = None
+
+    def __post_init__(self):
+        where = f"{self.name}: " if self.name else ""
+        v = np.asarray(self.vertices)
+        f = np.asarray(self.faces)
+        if v.ndim != 2 or v.shape[1] != 3:
+            raise MeshError(f"{where}vertices must have shape (n, 3), got {v.shape}")
+        if v.shape[0] == 0:
+            raise MeshError(f"{where}mesh is empty (0 vertices)")
+        if not np.issubdtype(v.dtype, np.number):
+            raise MeshError(f"{where}vertices must be numeric, got dtype {v.dtype}")
+        v = v.astype(np.float64)
+        bad = ~np.isfinite(v).all(axis=1)
+        if bad.any():
+            raise MeshError(
+                f"{where}{int(bad.sum())} vertices have NaN or infinite coordinates "
+                f"(first: vertex {int(np.flatnonzero(bad)[0])})"
+            )
+        if f.ndim != 2 or f.shape[1] != 3:
+            raise MeshError(f"{where}faces must have shape (m, 3), got {f.shape}")
+        if f.shape[0] == 0:
+            raise MeshError(f"{where}mesh has no faces")
+        if not np.issubdtype(f.dtype, np.integer):
+            if np.issubdtype(f.dtype, np.floating) and np.all(np.mod(f, 1) == 0):
+                f = f.astype(np.int64)
+            else:
+                raise MeshError(f"{where}faces must be integer indices, got dtype {f.dtype}")
+        f = f.astype(np.int64)
+        lo, hi = int(f.min()), int(f.max())
+        if lo < 0 or hi >= v.shape[0]:
+            raise MeshError(
+                f"{where}face indices out of range: found [{lo}, {hi}] for {v.shape[0]} vertices"
+            )
+        object.__setattr__(self, "vertices", _readonly(v))
+        object.__setattr__(self, "faces", _readonly(f))
+        if self.vertex_ids is not None:
+            ids = np.asarray(self.vertex_ids, dtype=np.int64)
+            if ids.shape != (v.shape[0],):
+                raise MeshError(f"{where}vertex_ids must have shape ({v.shape[0]},), got {ids.shape}")
+            object.__setattr__(self, "vertex_ids", _readonly(ids))
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.vertices.shape[0])
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.faces.shape[0])
+
+    def face_areas(self) -> np.ndarray:
+        """``(m,)`` triangle areas ½‖(v₁−v₀)×(v₂−v₀)‖."""
+        v = self.vertices
+        e1 = v[self.faces[:, 1]] - v[self.faces[:, 0]]
+        e2 = v[self.faces[:, 2]] - v[self.faces[:, 0]]
+        return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+
+    @property
+    def area(self) -> float:
+        """Total surface area."""
+        return float(self.face_areas().sum())
+
+    def __repr__(self) -> str:
+        name = f", name={self.name!r}" if self.name else ""
+        return f"Mesh(n_vertices={self.n_vertices}, n_faces={self.n_faces}{name})"
+
+
+def _triangulate(cells) -> np.ndarray:
+    """Fan-triangulate every polygon cell block (triangles pass through unchanged)."""
+    tris = []
+    for block in cells:
+        data = np.asarray(block.data)
+        if block.type in ("vertex", "line") or data.ndim != 2 or data.shape[1] < 3:
+            continue
+        if not block.type.startswith(("triangle", "quad", "polygon")):
+            continue  # volume cells (tetra, hexahedron, ...) have no surface meaning here
+        p = data.shape[1]
+        for j in range(1, p - 1):  # p - 2 triangles per polygon: a loop over polygon size only
+            tris.append(data[:, [0, j, j + 1]])
+    if not tris:
+        return np.zeros((0, 3), dtype=np.int64)
+    return np.concatenate(tris, axis=0).astype(np.int64)
+
+
+def clean_mesh(vertices: np.ndarray, faces: np.ndarray, name: str | None = None,
+               area_tol: float = 0.0) -> Mesh:
+    """Build a :class:`Mesh`, dropping zero-area faces and unreferenced vertices with a warning.
+
+    A face is degenerate when two of its indices coincide or its area is ``<= area_tol`` times the
+    mean face area.  Vertices no face references are removed; ``Mesh.vertex_ids`` records the
+    original index of every kept vertex.
+    """
+    where = f"{name}: " if name else ""
+    probe = Mesh(vertices, faces, name=name)  # validates shapes, finiteness, indices
+    v, f = probe.vertices, probe.faces
+    areas = probe.face_areas()
+    repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
+    degenerate = repeated | (areas <= area_tol * max(areas.mean(), np.finfo(float).tiny))
+    if degenerate.any():
+        warnings.warn(f"{where}removed {int(degenerate.sum())} zero-area faces", stacklevel=3)
+        f = f[~degenerate]
+        if f.shape[0] == 0:
+            raise MeshError(f"{where}every face has zero area")
+    used = np.zeros(v.shape[0], dtype=bool)
+    used[f.ravel()] = True
+    if not used.all():
+        warnings.warn(
+            f"{where}removed {int((~used).sum())} unreferenced vertices "
+            "(Mesh.vertex_ids maps kept vertices to file rows)",
+            stacklevel=3,
+        )
+        remap = np.cumsum(used) - 1
+        return Mesh(v[used], remap[f], vertex_ids=np.flatnonzero(used), name=name)
+    return Mesh(v, f, name=name)
+
+
+def load_mesh(path: str | os.PathLike) -> Mesh:
+    """Read a triangle or polygon mesh (OFF, PLY, OBJ, STL, and whatever else meshio reads).
+
+    Polygons are fan-triangulated; zero-area faces and unreferenced vertices are removed with a
+    warning that says how many.  Missing or unreadable files, NaN/inf coordinates, out-of-range
+    face indices and meshes without faces raise :class:`MeshError` naming the file.
+    """
+    import meshio
+
+    p = Path(path)
+    if not p.exists():
+        raise MeshError(f"{p}: no such file")
+    if p.is_dir():
+        raise MeshError(f"{p}: is a directory, not a mesh file")
+    try:
+        m = meshio.read(p)
+    except Exception as exc:  # meshio raises many types (ReadError, ValueError, IndexError, ...)
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise MeshError(f"{p}: cannot read mesh ({msg})") from exc
+    pts = np.asarray(m.points)
+    if pts.ndim != 2 or pts.shape[0] == 0:
+        raise MeshError(f"{p}: mesh is empty (0 vertices)")
+    if pts.shape[1] == 2:
+        pts = np.concatenate([pts, np.zeros((pts.shape[0], 1))], axis=1)
+    faces = _triangulate(m.cells)
+    if faces.shape[0] == 0:
+        raise MeshError(f"{p}: mesh has no faces (only triangle/polygon meshes are supported)")
+    return clean_mesh(pts, faces, name=str(p))
+
+
+def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = None) -> None:
+    """Write ``mesh`` (and optional per-vertex arrays) atomically; format from the extension.
+
+    ``point_data`` maps names to arrays of length ``n_vertices`` (e.g. a transferred
+    segmentation or an error map).  PLY keeps them as vertex properties that MeshLab shows;
+    ``red``/``green``/``blue`` uint8 arrays become vertex colours.
+    """
+    import meshio
+
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
+    data = {}
+    for key, val in (point_data or {}).items():
+        arr = np.asarray(val)
+        if arr.shape[:1] != (mesh.n_vertices,):
+            raise MeshError(
+                f"point_data[{key!r}] has {arr.shape[0] if arr.ndim else 'no'} rows, "
+                f"mesh has {mesh.n_vertices} vertices"
+            )
+        data[key] = arr
+    out = meshio.Mesh(np.asarray(mesh.vertices), [("triangle", np.asarray(mesh.faces))],
+                      point_data=data)
+    try:
+        with atomic_path(path) as tmp:  # the temp name keeps the extension meshio reads
+            meshio.write(tmp, out)
+    except meshio.WriteError as exc:
+        raise MeshError(f"{path}: cannot write mesh ({exc})") from exc
