@@ -15,7 +15,14 @@ from importlib.metadata import PackageNotFoundError, version as _version
 from .errors import BSFError, MeshError
 from .laplacian import laplacian
 from .mesh import Mesh, load_mesh, save_mesh
+from .example import ExamplePair, example_mesh, example_pair
 from .spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_operators
+from .sampling import farthest_point_sampling
+from .frame import Frame, build_frame, transfer_frame
+from .descriptors import hks, wks
+from .fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
+from .estimation import FmapWeights, estimate_fmap, fmap_energy
+from .geodesics import geodesic_distances, geodesic_error
 
 try:
     __version__ = _version("bsfjax")
@@ -23,7 +30,26 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 __all__ = [
+    "FmapWeights",
+    "estimate_fmap",
+    "fmap_energy",
+    "fmap_from_p2p",
+    "fmap_to_p2p",
+    "geodesic_distances",
+    "geodesic_error",
+    "hks",
+    "icp_refine",
+    "nearest_neighbors",
+    "wks",
+    "zoomout",
+    "ExamplePair",
+    "example_mesh",
+    "example_pair",
     "BSFError",
+    "Frame",
+    "build_frame",
+    "farthest_point_sampling",
+    "transfer_frame",
     "Mesh",
     "MeshError",
     "Spectrum",

@@ -161,31 +161,152 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, name: str | None = None,
     return Mesh(v, f, name=name)
 
 
-def load_mesh(path: str | os.PathLike) -> Mesh:
-    """Read a triangle or polygon mesh (OFF, PLY, OBJ, STL, and whatever else meshio reads).
+def _read_off(p: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Read an ASCII OFF file (OFF/COFF/NOFF headers, polygons of any size, '#' comments).
 
-    Polygons are fan-triangulated; zero-area faces and unreferenced vertices are removed with a
-    warning that says how many.  Missing or unreadable files, NaN/inf coordinates, out-of-range
-    face indices and meshes without faces raise :class:`MeshError` naming the file.
+    meshio's OFF reader accepts triangles only and exits the interpreter on bad input, so OFF,
+    the format of the common shape-correspondence datasets, gets this strict reader.  Counts
+    are checked against the file before anything is allocated.
     """
+    raw = p.read_bytes()
+    try:
+        text = raw.decode("ascii")
+    except UnicodeDecodeError as exc:
+        raise MeshError(f"{p}: cannot read mesh (not an ASCII OFF file; binary OFF is not "
+                        "supported)") from exc
+    lines = [ln.split("#", 1)[0].split() for ln in text.splitlines()]
+    lines = [ln for ln in lines if ln]
+    if not lines or not lines[0][0].upper().endswith("OFF"):
+        raise MeshError(f"{p}: cannot read mesh (missing OFF header)")
+    head = lines[0][1:] if len(lines[0]) > 1 else (lines[1] if len(lines) > 1 else [])
+    body = lines[1:] if len(lines[0]) > 1 else lines[2:]
+    try:
+        nv, nf = int(head[0]), int(head[1])
+    except (IndexError, ValueError) as exc:
+        raise MeshError(f"{p}: cannot read mesh (bad OFF counts line {head!r})") from exc
+    if nv < 0 or nf < 0:
+        raise MeshError(f"{p}: cannot read mesh (negative counts {nv} vertices, {nf} faces)")
+    if nv + nf > len(body):
+        raise MeshError(f"{p}: cannot read mesh (header declares {nv} vertices and {nf} faces "
+                        f"but the file has only {len(body)} data lines: truncated?)")
+    if nv == 0:
+        raise MeshError(f"{p}: mesh is empty (0 vertices)")
+    try:
+        verts = np.array([ln[:3] for ln in body[:nv]], dtype=np.float64)
+    except ValueError as exc:
+        raise MeshError(f"{p}: cannot read mesh (bad vertex line: {exc})") from exc
+    if verts.shape != (nv, 3):
+        raise MeshError(f"{p}: cannot read mesh (every vertex line needs 3 coordinates)")
+    groups: dict[int, list] = {}
+    for ln in body[nv:nv + nf]:  # faces grouped by polygon size, then triangulated per group
+        try:
+            size = int(ln[0])
+            idx = [int(t) for t in ln[1:1 + size]]
+        except ValueError as exc:
+            raise MeshError(f"{p}: cannot read mesh (bad face line {' '.join(ln)!r})") from exc
+        if size < 3 or len(idx) != size:
+            raise MeshError(f"{p}: cannot read mesh (bad face line {' '.join(ln)!r})")
+        groups.setdefault(size, []).append(idx)
+    tris = []
+    for size, polys in groups.items():
+        arr = np.asarray(polys, dtype=np.int64)
+        tris.extend(arr[:, [0, j, j + 1]] for j in range(1, size - 1))
+    faces = np.concatenate(tris) if tris else np.zeros((0, 3), np.int64)
+    return verts, faces
+
+
+_PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2,
+              "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4,
+              "double": 8, "float64": 8}
+
+
+def _check_ply(p: Path) -> None:
+    """Reject PLY files whose header is unterminated or whose counts exceed the file.
+
+    meshio's PLY reader loops forever on a header without ``end_header`` and allocates whatever
+    a header declares, so the header is checked first against the bytes actually present.
+    """
+    size = p.stat().st_size
+    with open(p, "rb") as fh:
+        head = fh.read(1 << 20)
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        raise MeshError(f"{p}: cannot read mesh (PLY header missing or not terminated by end_header)")
+    body = size - (head.find(b"\n", end) + 1)
+    fmt, min_bytes, lines_needed, current = "ascii", 0, 0, None
+    for line in head[:end].decode("ascii", "replace").splitlines():
+        tok = line.split()
+        if not tok:
+            continue
+        if tok[0] == "format" and len(tok) > 1:
+            fmt = tok[1]
+        elif tok[0] == "element" and len(tok) == 3:
+            try:
+                current = int(tok[2])
+            except ValueError:
+                raise MeshError(f"{p}: cannot read mesh (bad PLY element line {line!r})") from None
+            if current < 0:
+                raise MeshError(f"{p}: cannot read mesh (negative PLY element count {current})")
+            lines_needed += current
+        elif tok[0] == "property" and current is not None:
+            if len(tok) >= 5 and tok[1] == "list":  # a list holds at least its count
+                min_bytes += current * _PLY_SIZES.get(tok[2], 1)
+            elif len(tok) >= 3:
+                min_bytes += current * _PLY_SIZES.get(tok[1], 1)
+    if fmt == "ascii":
+        if head.count(b"\n", end) - 1 < lines_needed and size <= len(head):
+            raise MeshError(f"{p}: cannot read mesh (PLY header declares {lines_needed} element "
+                            "lines but the file is shorter: truncated?)")
+    elif min_bytes > body:
+        raise MeshError(f"{p}: cannot read mesh (PLY header declares at least {min_bytes} bytes "
+                        f"of data but only {body} follow: truncated?)")
+
+
+def _read_meshio(p: Path) -> tuple[np.ndarray, np.ndarray]:
+    import contextlib
+    import io
+
     import meshio
 
-    p = Path(path)
-    if not p.exists():
-        raise MeshError(f"{p}: no such file")
-    if p.is_dir():
-        raise MeshError(f"{p}: is a directory, not a mesh file")
+    if p.suffix.lower() == ".ply":
+        _check_ply(p)
+    # meshio prints to stdout and calls sys.exit() when no reader accepts a file: capture both
     try:
-        m = meshio.read(p)
-    except Exception as exc:  # meshio raises many types (ReadError, ValueError, IndexError, ...)
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()), \
+                warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # meshio's STL size probe overflows
+            m = meshio.read(p)
+    except (Exception, SystemExit) as exc:
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if isinstance(exc, SystemExit):
+            msg = "unrecognized or malformed file"
         raise MeshError(f"{p}: cannot read mesh ({msg})") from exc
     pts = np.asarray(m.points)
     if pts.ndim != 2 or pts.shape[0] == 0:
         raise MeshError(f"{p}: mesh is empty (0 vertices)")
     if pts.shape[1] == 2:
         pts = np.concatenate([pts, np.zeros((pts.shape[0], 1))], axis=1)
-    faces = _triangulate(m.cells)
+    return pts, _triangulate(m.cells)
+
+
+def load_mesh(path: str | os.PathLike) -> Mesh:
+    """Read a triangle or polygon mesh (OFF, PLY, OBJ, STL, and whatever else meshio reads).
+
+    OFF goes through bsfjax's own strict ASCII reader; other formats through meshio.
+    Polygons are fan-triangulated; zero-area faces and unreferenced vertices are removed with a
+    warning that says how many (``Mesh.vertex_ids`` maps kept vertices to file rows).  Missing or
+    unreadable files, NaN/inf coordinates, out-of-range face indices and meshes without faces
+    raise :class:`MeshError` naming the file.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise MeshError(f"{p}: no such file")
+    if p.is_dir():
+        raise MeshError(f"{p}: is a directory, not a mesh file")
+    try:
+        pts, faces = _read_off(p) if p.suffix.lower() == ".off" else _read_meshio(p)
+    except OSError as exc:
+        raise MeshError(f"{p}: cannot read file ({exc.strerror or exc})") from exc
     if faces.shape[0] == 0:
         raise MeshError(f"{p}: mesh has no faces (only triangle/polygon meshes are supported)")
     return clean_mesh(pts, faces, name=str(p))
@@ -202,6 +323,18 @@ def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = Non
 
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
+    import contextlib
+    import io
+
+    from meshio._helpers import _filetypes_from_path  # format lookup by extension
+
+    dest = Path(path)
+    try:
+        _filetypes_from_path(dest)
+    except Exception as exc:
+        raise MeshError(f"{dest}: cannot write mesh (unknown format {dest.suffix!r}; use .ply, "
+                        ".off, .obj, .stl, ...)") from exc
+    small_ints = dest.suffix.lower() == ".ply"  # PLY has no 64-bit integers
     data = {}
     for key, val in (point_data or {}).items():
         arr = np.asarray(val)
@@ -210,11 +343,15 @@ def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = Non
                 f"point_data[{key!r}] has {arr.shape[0] if arr.ndim else 'no'} rows, "
                 f"mesh has {mesh.n_vertices} vertices"
             )
+        if small_ints and arr.dtype == np.int64:
+            arr = arr.astype(np.int32)
+        if arr.dtype == np.bool_:
+            arr = arr.astype(np.uint8)
         data[key] = arr
-    out = meshio.Mesh(np.asarray(mesh.vertices), [("triangle", np.asarray(mesh.faces))],
-                      point_data=data)
+    faces = np.asarray(mesh.faces, dtype=np.int32 if small_ints else np.int64)
+    out = meshio.Mesh(np.asarray(mesh.vertices), [("triangle", faces)], point_data=data)
     try:
-        with atomic_path(path) as tmp:  # the temp name keeps the extension meshio reads
-            meshio.write(tmp, out)
-    except meshio.WriteError as exc:
-        raise MeshError(f"{path}: cannot write mesh ({exc})") from exc
+        with atomic_path(dest) as tmp, contextlib.redirect_stdout(io.StringIO()):
+            meshio.write(tmp, out)  # the temp name keeps the extension meshio reads
+    except (meshio.WriteError, ValueError, KeyError) as exc:
+        raise MeshError(f"{dest}: cannot write mesh ({exc})") from exc

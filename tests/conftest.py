@@ -1,0 +1,54 @@
+"""Shared fixtures: the real-mesh folder and small synthetic meshes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+#: ``../shared/data`` beside the repository (see its README for origin and terms).
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def data_path(*parts: str) -> Path:
+    """Path of a file in the shared data folder, or skip the test with the reason."""
+    p = DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"real-mesh data not found at {p} (expected ../shared/data beside the repo)")
+    return p
+
+
+def icosphere(subdivisions: int = 2, radius: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """A closed, well-shaped triangulated sphere (vertices, faces) by icosahedron subdivision."""
+    t = (1 + 5 ** 0.5) / 2
+    v = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
+    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    for _ in range(subdivisions):
+        edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        uniq, inv = np.unique(edges, axis=0, return_inverse=True)
+        mid = len(v) + inv.reshape(3, -1).T  # midpoint index of edges (01, 12, 20) per face
+        v = np.concatenate([v, 0.5 * (v[uniq[:, 0]] + v[uniq[:, 1]])])
+        a, b, c = f[:, 0], f[:, 1], f[:, 2]
+        ab, bc, ca = mid[:, 0], mid[:, 1], mid[:, 2]
+        f = np.concatenate([np.stack(s, 1) for s in ([a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca])])
+    v = radius * v / np.linalg.norm(v, axis=1, keepdims=True)
+    return v, f
+
+
+@pytest.fixture(scope="session")
+def sphere_mesh():
+    import bsfjax
+
+    v, f = icosphere(3)
+    return bsfjax.Mesh(v, f, name="icosphere3")
+
+
+@pytest.fixture(scope="session")
+def faust_mesh():
+    import bsfjax
+
+    return bsfjax.load_mesh(data_path("faust", "tr_reg_000.off"))
