@@ -19,6 +19,7 @@ from .example import ExamplePair, example_mesh, example_pair
 from .spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_operators
 from .sampling import farthest_point_sampling
 from .frame import Frame, build_frame, transfer_frame
+from .coding import CodingInfo, decode, encode
 from .descriptors import hks, wks
 from .fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
 from .estimation import FmapWeights, estimate_fmap, fmap_energy
@@ -30,6 +31,9 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 __all__ = [
+    "CodingInfo",
+    "decode",
+    "encode",
     "FmapWeights",
     "estimate_fmap",
     "fmap_energy",

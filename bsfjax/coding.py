@@ -446,7 +446,7 @@ def _omp(B, C, fnorm2, eps, n_steps: int, gram: bool):
     def body(state):
         t, idx, Linv, y, gsel, c, avail, n_sel, exhausted, done, res2 = state
         score = jnp.where(avail, jnp.abs(c), -1.0)
-        k = jnp.argmax(score, axis=1)
+        k = jnp.argmax(score, axis=1).astype(jnp.int32)
         ck = c[rows, k]
         none_left = score[rows, k] < 0
         fitted = ck * ck <= tiny * fnorm2  # residual orthogonal to all atoms (or f = 0)
@@ -543,7 +543,7 @@ def _lasso(B, C, lam, init, maxiter: int, tol: float):
 
     solver = ProximalGradient(fun=value_and_grad, value_and_grad=True, prox=prox_lasso,
                               stepsize=1.0, maxiter=maxiter, tol=tol, acceleration=True,
-                              implicit_diff=False)
+                              implicit_diff=False, unroll=False)
 
     def one(z0, ch):
         res = solver.run(z0, jnp.asarray(lam, C.dtype), ch)

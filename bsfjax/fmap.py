@@ -16,9 +16,10 @@ nearest,
     p2p[i] = argmin_j ‖(Φ_N C)[i, :] − Φ_M[j, :]‖                 (``adjoint=True``).
 
 The nearest-neighbour search is exact and chunked: target rows are processed ``chunk`` at a time
-(``lax.map``), so at most ``chunk × n_M`` distances exist at once.  Candidates are ranked by
-``‖y‖² − 2 x·y`` (one GEMM per chunk), the best few (``_N_CANDIDATES``) are re-scored with the
-direct difference ``‖x − y‖²``, which removes the cancellation error of the expanded form.
+(``lax.map``), so at most ``chunk × n_M`` distances exist at once.  Both point sets are centred on the
+reference mean, candidates are ranked by ``‖y‖² − 2 x·y`` (one GEMM per chunk), and the best few
+(``_N_CANDIDATES``) are re-scored with the direct difference ``‖x − y‖²``, which removes the
+cancellation error of the expanded form.
 
 Refinement (all jitted, one ``lax.fori_loop``):
 
@@ -108,6 +109,10 @@ def _nearest(ref: jax.Array, qry: jax.Array, chunk: int) -> jax.Array:
     """
     n_q, d = qry.shape
     n_chunks = -(-n_q // chunk)
+    # Distances are translation invariant; centring keeps ‖r‖² small next to the gaps between
+    # neighbours, so the expanded form loses little to cancellation.
+    centre = jnp.mean(ref, axis=0)
+    ref, qry = ref - centre, qry - centre
     qp = jnp.pad(qry, ((0, n_chunks * chunk - n_q), (0, 0)))
     ref_sq = jnp.sum(ref * ref, axis=1)
     n_cand = min(_N_CANDIDATES, ref.shape[0])

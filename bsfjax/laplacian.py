@@ -28,7 +28,8 @@ def _corner_cotangents(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.nda
     Column c holds the corner at ``f[:, c]``, whose opposite edge is ``(f[:, c+1], f[:, c+2])``.
     cot θ = (a·b) / ‖a×b‖ for the two edge vectors a, b leaving the corner.
     """
-    p0, p1, p2 = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    P = v[f]  # (m, 3, 3): one gather for all corners
+    p0, p1, p2 = P[:, 0], P[:, 1], P[:, 2]
     e0, e1, e2 = p2 - p1, p0 - p2, p1 - p0  # e_c is the edge opposite corner c
     cross = np.cross(e1, e2)
     dbl_area = np.linalg.norm(cross, axis=1)
@@ -45,20 +46,39 @@ def _corner_cotangents(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.nda
     return cots, dbl_area
 
 
-def cotangent_stiffness(mesh: Mesh) -> sp.csr_matrix:
-    """Positive semidefinite cotangent stiffness matrix ``W`` (n × n, CSR, float64)."""
-    v, f = mesh.vertices, mesh.faces
-    n = mesh.n_vertices
-    cots, _ = _corner_cotangents(v, f)
-    # corner c weights the opposite edge (f[c+1], f[c+2]) by ½ cot
+def _stiffness(f: np.ndarray, cots: np.ndarray, n: int) -> sp.csr_matrix:
+    # corner c weights its opposite edge (f[c+1], f[c+2]) by −½ cot θ_c; one triangle per
+    # half-edge, then H + Hᵀ adds the two triangles of an interior edge (cheaper in scipy than
+    # summing duplicate COO entries)
     i = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
     j = np.concatenate([f[:, 2], f[:, 0], f[:, 1]])
-    w = 0.5 * np.concatenate([cots[:, 0], cots[:, 1], cots[:, 2]])
-    diag = np.bincount(i, weights=w, minlength=n) + np.bincount(j, weights=w, minlength=n)
-    rows = np.concatenate([i, j, np.arange(n)])
-    cols = np.concatenate([j, i, np.arange(n)])
-    vals = np.concatenate([-w, -w, diag])
-    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+    w = -0.5 * cots.T.ravel()
+    H = sp.coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
+    off = H + H.T
+    return (off - sp.diags(np.asarray(off.sum(axis=1)).ravel())).tocsr()
+
+
+def cotangent_stiffness(mesh: Mesh) -> sp.csr_matrix:
+    """Positive semidefinite cotangent stiffness matrix ``W`` (n × n, CSR, float64)."""
+    cots, _ = _corner_cotangents(mesh.vertices, mesh.faces)
+    return _stiffness(mesh.faces, cots, mesh.n_vertices)
+
+
+def _mass(v: np.ndarray, f: np.ndarray, cots: np.ndarray, dbl_area: np.ndarray, n: int,
+          kind: str) -> np.ndarray:
+    area = 0.5 * dbl_area
+    if kind == "barycentric":
+        per_corner = np.repeat(area[:, None] / 3.0, 3, axis=1)
+    else:
+        p = [v[f[:, c]] for c in range(3)]
+        sq = np.stack([np.sum((p[(c + 2) % 3] - p[(c + 1) % 3]) ** 2, axis=1) for c in range(3)], 1)
+        # Voronoi share of corner c: ⅛ Σ over its two edges of |edge|² cot(opposite corner)
+        sc = sq * cots
+        vor = (np.roll(sc, -1, axis=1) + np.roll(sc, -2, axis=1)) / 8.0
+        obtuse = cots < 0  # cot θ < 0 ⇔ θ > 90°
+        any_obtuse = obtuse.any(axis=1, keepdims=True)
+        per_corner = np.where(any_obtuse, np.where(obtuse, area[:, None] / 2, area[:, None] / 4), vor)
+    return np.bincount(f.ravel(), weights=per_corner.ravel(), minlength=n)
 
 
 def mass_matrix(mesh: Mesh, kind: str = "mixed") -> sp.csr_matrix:
@@ -72,26 +92,8 @@ def mass_matrix(mesh: Mesh, kind: str = "mixed") -> sp.csr_matrix:
     """
     if kind not in MASS_TYPES:
         raise ValueError(f"mass must be one of {MASS_TYPES}, got {kind!r}")
-    v, f = mesh.vertices, mesh.faces
-    n = mesh.n_vertices
-    cots, dbl_area = _corner_cotangents(v, f)
-    area = 0.5 * dbl_area
-    if kind == "barycentric":
-        per_corner = np.repeat(area[:, None] / 3.0, 3, axis=1)
-    else:
-        p = [v[f[:, c]] for c in range(3)]
-        sq = np.stack([np.sum((p[(c + 2) % 3] - p[(c + 1) % 3]) ** 2, axis=1) for c in range(3)], 1)
-        # Voronoi share of corner c: ⅛ Σ over its two edges of |edge|² cot(opposite corner)
-        vor = np.stack(
-            [(sq[:, (c + 1) % 3] * cots[:, (c + 1) % 3] + sq[:, (c + 2) % 3] * cots[:, (c + 2) % 3]) / 8.0
-             for c in range(3)],
-            axis=1,
-        )
-        obtuse = cots < 0  # cot θ < 0 ⇔ θ > 90°
-        any_obtuse = obtuse.any(axis=1, keepdims=True)
-        per_corner = np.where(any_obtuse, np.where(obtuse, area[:, None] / 2, area[:, None] / 4), vor)
-    diag = np.bincount(f.ravel(), weights=per_corner.ravel(), minlength=n)
-    return sp.diags(diag).tocsr()
+    cots, dbl_area = _corner_cotangents(mesh.vertices, mesh.faces)
+    return sp.diags(_mass(mesh.vertices, mesh.faces, cots, dbl_area, mesh.n_vertices, kind)).tocsr()
 
 
 def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp.csr_matrix, sp.csr_matrix]:
@@ -119,9 +121,14 @@ def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp
                               "pip install 'bsfjax[robust]'") from exc
         W, A = robust_laplacian.mesh_laplacian(np.asarray(mesh.vertices), np.asarray(mesh.faces))
         return sp.csr_matrix(W), sp.csr_matrix(A)
-    W = cotangent_stiffness(mesh)
-    A = mass_matrix(mesh, mass)
-    bad = A.diagonal() <= 0
+    if mass not in MASS_TYPES:
+        raise ValueError(f"mass must be one of {MASS_TYPES}, got {mass!r}")
+    v, f, n = mesh.vertices, mesh.faces, mesh.n_vertices
+    cots, dbl_area = _corner_cotangents(v, f)  # shared by W and A
+    W = _stiffness(f, cots, n)
+    a = _mass(v, f, cots, dbl_area, n, mass)
+    A = sp.diags(a).tocsr()
+    bad = a <= 0
     if bad.any():
         where = f"{mesh.name}: " if mesh.name else ""
         raise MeshError(f"{where}{int(bad.sum())} vertices have zero mass "
