@@ -20,10 +20,13 @@ from .spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_opera
 from .sampling import farthest_point_sampling
 from .frame import Frame, build_frame, transfer_frame
 from .coding import CodingInfo, decode, encode
+from .pipeline import PairResult, approximate, stack_spectra, transfer, transfer_pairs
 from .descriptors import hks, wks
 from .fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
 from .estimation import FmapWeights, estimate_fmap, fmap_energy
 from .geodesics import geodesic_distances, geodesic_error
+from .metrics import relative_error
+from .indicators import indicators_to_labels, labels_to_indicators, random_indicators
 
 try:
     __version__ = _version("bsfjax")
@@ -31,6 +34,15 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 __all__ = [
+    "relative_error",
+    "random_indicators",
+    "labels_to_indicators",
+    "indicators_to_labels",
+    "PairResult",
+    "approximate",
+    "stack_spectra",
+    "transfer",
+    "transfer_pairs",
     "CodingInfo",
     "decode",
     "encode",

@@ -1,9 +1,15 @@
-"""The ``bsfjax`` command line."""
+"""The ``bsfjax`` command line: ``demo``, ``transfer``, ``reproduce``, ``spectrum``.
+
+Bad input ends with a one-line message on stderr and exit status 2, never a traceback, and no
+partial output file (every output is written atomically, after all the work is done).
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import warnings
+from pathlib import Path
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -16,12 +22,216 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"bsfjax {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    p = sub.add_parser("spectrum", help="compute and cache the Laplace-Beltrami spectrum of a mesh")
+
+    p = sub.add_parser("demo", help="run the whole pipeline on the built-in example pair (the main job)")
+    p.add_argument("--out", default="bsfjax-demo", help="output folder (default ./bsfjax-demo)")
+    p.add_argument("-k", type=int, default=30, help="eigenpairs used by every method (default 30)")
+    p.add_argument("--functions", type=int, default=50, help="random indicators (default 50)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("transfer", help="transfer a segmentation or a function from one mesh to another")
+    p.add_argument("source", help="source mesh (OFF, PLY, OBJ, STL, ...)")
+    p.add_argument("target", help="target mesh")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--labels", help="one integer label per source vertex (.txt or .npy)")
+    what.add_argument("--function", help="per-source-vertex values: (n,) or (n, m) (.txt or .npy)")
+    p.add_argument("--out", required=True, help="per-target-vertex labels/values (.txt or .npy)")
+    p.add_argument("--map", nargs="+", default=["estimate"], metavar="KIND [FILE]",
+                   help="'estimate' (default: WKS + landmarks + ZoomOut), 'p2p FILE' (one source "
+                        "vertex index per target vertex) or 'fmap FILE' (k x k matrix, source -> target)")
+    p.add_argument("--landmarks", help="landmark vertex indices 'i,j,...:i2,j2,...' (source:target)")
+    p.add_argument("-k", type=int, default=30, help="spectral basis size (default 30)")
+    p.add_argument("--method", default="omp", help="omp (default), omp_error, lstsq, lasso, std, p2p")
+    p.add_argument("--mesh-out", help="also write the target mesh coloured by the result (.ply)")
+    p.add_argument("--threshold", type=float, default=0.5,
+                   help="labels: a target vertex whose best score is below this is unassigned (-1)")
+    p.set_defaults(func=_cmd_transfer)
+
+    p = sub.add_parser("spectrum", help="compute the Laplace-Beltrami spectrum of a mesh")
     p.add_argument("mesh", help="mesh file (OFF, PLY, OBJ, STL, ...)")
     p.add_argument("-k", type=int, default=100, help="number of eigenpairs (default 100)")
     p.add_argument("--out", required=True, help="output .npz with evals, evecs, mass")
     p.set_defaults(func=_cmd_spectrum)
+
+    p = sub.add_parser("reproduce", help="run one of the paper's experiments (tables 1-5, "
+                       "figures 7 and 10) on a data folder; writes CSV, Markdown and PNG")
+    p.add_argument("name", choices=("table1", "table2", "fig7", "table3", "table4", "table5",
+                                    "fig10"), help="experiment")
+    p.add_argument("--data", required=True, help="folder of meshes with ground truth (FAUST-style "
+                   "shared vertex order, or corres/<name>.vts files; class subfolders for TOSCA)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--pairs", type=int, default=2, help="shape pairs (table5: per class; "
+                   "default 2)")
+    p.add_argument("--functions", type=int, default=100, help="random indicator functions per "
+                   "shape (default 100)")
+    p.add_argument("--seed", type=int, default=0, help="seed of pairs, functions and FPS")
+    p.add_argument("--k", default=None, help="comma-separated k list overriding the "
+                   "experiment's (fig7: k_M values; fig10: its k)")
+    p.add_argument("--cache", default=None, help="eigenbasis cache folder (default OUT/.spectra)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=lambda a: __import__("bsfjax.experiments", fromlist=["x"]).cli(a))
     return parser
+
+
+class CLIError(ValueError):
+    """Bad command-line input (reported as one line)."""
+
+
+def _read_array(path: str, what: str, dtype=None):
+    import numpy as np
+
+    p = Path(path)
+    if not p.exists():
+        raise CLIError(f"{what} file {p}: no such file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # loadtxt on an empty file
+            arr = np.load(p, allow_pickle=False) if p.suffix == ".npy" else np.loadtxt(p, ndmin=1)
+    except Exception as exc:
+        raise CLIError(f"{what} file {p}: cannot read ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from exc
+    if arr.size == 0:
+        raise CLIError(f"{what} file {p}: no data")
+    if not np.issubdtype(arr.dtype, np.number):
+        raise CLIError(f"{what} file {p}: expected numbers, got dtype {arr.dtype}")
+    if dtype is int:
+        if not np.all(np.isfinite(arr)) or not np.all(np.mod(arr, 1) == 0):
+            raise CLIError(f"{what} file {p}: expected integers")
+        arr = arr.astype(np.int64)
+    return arr
+
+
+def _write_array(path: str, arr) -> None:
+    import numpy as np
+
+    from ._files import atomic_path
+
+    p = Path(path)
+    if p.suffix not in (".npy", ".txt"):
+        raise CLIError(f"--out {p}: use a .txt or .npy file name")
+    with atomic_path(p) as tmp:
+        if p.suffix == ".npy":
+            with open(tmp, "wb") as fh:
+                np.save(fh, arr)
+        else:
+            np.savetxt(tmp, arr, fmt="%d" if np.issubdtype(arr.dtype, np.integer) else "%.8g")
+
+
+def _parse_landmarks(text: str | None):
+    if text is None:
+        return None
+    try:
+        left, right = text.split(":")
+        src = [int(t) for t in left.split(",") if t.strip()]
+        tgt = [int(t) for t in right.split(",") if t.strip()]
+    except ValueError:
+        raise CLIError(f"--landmarks must look like 'i,j,...:i2,j2,...', got {text!r}") from None
+    if len(src) != len(tgt) or not src:
+        raise CLIError(f"--landmarks: {len(src)} source and {len(tgt)} target indices; the two "
+                       "lists must have the same, non-zero length")
+    return src, tgt
+
+
+def _cmd_transfer(args) -> int:
+    import numpy as np
+
+    from .highlevel import TRANSFER_METHODS, estimate_map, transfer_labels, transfer_values
+    from .mesh import load_mesh, save_mesh
+    from .spectrum import spectrum
+
+    if args.method not in TRANSFER_METHODS:
+        raise CLIError(f"--method must be one of {', '.join(TRANSFER_METHODS)}, got {args.method!r}")
+    if Path(args.out).suffix not in (".npy", ".txt"):
+        raise CLIError(f"--out {args.out}: use a .txt or .npy file name")
+    if args.mesh_out and Path(args.mesh_out).suffix.lower() != ".ply":
+        raise CLIError(f"--mesh-out {args.mesh_out}: use a .ply file name")
+    kind, *rest = args.map
+    if kind not in ("estimate", "p2p", "fmap") or (kind == "estimate") != (len(rest) == 0) or len(rest) > 1:
+        raise CLIError("--map must be 'estimate', 'p2p FILE' or 'fmap FILE'")
+    landmarks = _parse_landmarks(args.landmarks)
+    source, target = load_mesh(args.source), load_mesh(args.target)
+    if args.labels:
+        values = _read_array(args.labels, "labels", dtype=int)
+        if values.ndim != 1:
+            raise CLIError(f"labels file {args.labels}: expected one label per line")
+        if values.min() < 0:
+            raise CLIError(f"labels file {args.labels}: labels must be >= 0")
+    else:
+        values = _read_array(args.function, "function")
+        values = values.T if values.ndim == 2 else values
+    if values.shape[-1] != source.n_vertices:
+        raise CLIError(f"{'labels' if args.labels else 'function'} file has {values.shape[-1]} "
+                       f"entries per function but the source mesh has {source.n_vertices} vertices")
+    k = args.k
+    kmax = min(source.n_vertices, target.n_vertices) - 1
+    if not 1 <= k <= kmax:
+        raise CLIError(f"-k must be in [1, {kmax}], got {k}")
+    C = p2p = None
+    k_spec = min(2 * k, kmax) if kind == "estimate" else k
+    if kind == "fmap":
+        C = _read_array(rest[0], "fmap")
+        if C.ndim != 2 or C.shape[0] != C.shape[1]:
+            raise CLIError(f"fmap file {rest[0]}: expected a square k x k matrix, got shape {C.shape}")
+        k = k_spec = C.shape[0]
+    sm, sn = spectrum(source, k_spec), spectrum(target, k_spec)
+    print(f"spectra: {source.n_vertices} and {target.n_vertices} vertices, k = {k_spec}", file=sys.stderr)
+    if kind == "p2p":
+        p2p = _read_array(rest[0], "p2p", dtype=int)
+        if p2p.shape != (target.n_vertices,) or p2p.min() < 0 or p2p.max() >= source.n_vertices:
+            raise CLIError(f"p2p file {rest[0]}: expected {target.n_vertices} source vertex indices in "
+                           f"[0, {source.n_vertices})")
+        from .fmap import fmap_from_p2p
+
+        C = np.asarray(fmap_from_p2p(sm, sn, p2p))
+    elif kind == "estimate":
+        if landmarks is None:
+            warnings.warn("no --landmarks: an intrinsically symmetric shape may be matched to its "
+                          "mirror image", stacklevel=1)
+        est = estimate_map(sm, sn, k=k, landmarks=landmarks, refine_to=k_spec)
+        C, p2p = est.C, est.p2p
+        print(f"estimated a {k}x{k} map (ZoomOut to {k_spec})", file=sys.stderr)
+    common = dict(C=C, p2p=p2p, method=args.method, mesh=source)
+    if args.labels:
+        res = transfer_labels(sm, sn, values, threshold=args.threshold, **common)
+        result = res.labels.astype(np.int64)
+        print(f"transferred {int(values.max()) + 1} labels with {args.method}; unassigned: "
+              f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
+    else:
+        result = transfer_values(sm, sn, values, **common)
+        result = result.T if result.ndim == 2 else result
+    if args.mesh_out:
+        from .plot import _label_colour  # the segmentation palette of the figures
+
+        if args.labels:
+            rgb = _label_colour(result)
+            data = {"label": result}
+        else:
+            from matplotlib import colormaps
+
+            v = result if result.ndim == 1 else result[:, 0]
+            lo, hi = float(np.min(v)), float(np.max(v))
+            rgb = colormaps["viridis"]((v - lo) / (hi - lo if hi > lo else 1.0))[:, :3]
+            data = {"value": v}
+        rgb8 = np.clip(np.round(255 * rgb), 0, 255).astype(np.uint8)
+        data.update(red=rgb8[:, 0], green=rgb8[:, 1], blue=rgb8[:, 2])
+        save_mesh(args.mesh_out, target, point_data=data)
+    _write_array(args.out, result)
+    print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else ""), file=sys.stderr)
+    return 0
+
+
+def _cmd_demo(args) -> int:
+    from .demo import format_table, run_demo
+
+    print("bsfjax demo: the whole pipeline on the built-in example pair", flush=True)
+    results = run_demo(args.out, k=args.k, n_functions=args.functions, seed=args.seed,
+                       figures=not args.no_figures)
+    print()
+    print(format_table(results))
+    print(f"\nwrote {Path(args.out) / 'results.json'}"
+          + (f" and {len(results.get('figures', []))} PNG figures" if not args.no_figures else ""))
+    return 0
 
 
 def _cmd_spectrum(args) -> int:
@@ -46,11 +256,16 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "func", None) is None:
         parser.print_help()
         return 0
+    warnings.filterwarnings("ignore", message="JAXopt is no longer maintained")
     try:
         return int(args.func(args) or 0)
     except (ValueError, OSError) as exc:  # bad input: one line, no traceback
-        print(f"bsfjax {args.command}: error: {exc}", file=sys.stderr)
+        msg = " ".join(str(exc).split()) or type(exc).__name__
+        print(f"bsfjax {args.command}: error: {msg}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # pragma: no cover
+        print(f"bsfjax {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -3,42 +3,56 @@
 Given descriptors ``d_M`` ``(n_M, p)`` on the source and ``d_N`` ``(n_N, p)`` on the target (column
 ``q`` of both describes "the same" function), the functional map ``C`` ``(k_N, k_M)`` minimizes
 
-    E(C) = μ_descr · ½ ‖C F_M − F_N‖²                         descriptor preservation
-         + μ_lap   · ½ Σ_ij M_ij C_ij²                          Laplacian commutativity
-         + μ_comm  · ½ Σ_q ‖C D_M^q − D_N^q C‖²                  descriptor commutativity
+    E(C) = μ_descr  · ½ ‖C F_M − F_N‖²                     descriptor preservation
+         + μ_lap    · ½ Σ_ij M_ij C_ij²                      Laplacian commutativity
+         + μ_comm   · ½ Σ_q ‖C D_M^q − D_N^q C‖²             descriptor commutativity
+         + μ_orient · ½ Σ_q ‖C O_M^q − σ O_N^q C‖²           orientation (optional, μ = 0 default)
 
 with ``F = Φᵀ A d`` the spectral coefficients of the descriptors and
 ``D^q = Φᵀ A diag(d_q) Φ`` the multiplication operator of descriptor ``q`` in the reduced basis
 (Nogneng & Ovsjanikov 2017).  ``M`` is the Laplacian mask: ``"plain"`` gives
 ``M_ij = (λ_M,j − λ_N,i)²``, i.e. ‖C Λ_M − Λ_N C‖²; ``"resolvent"`` (default, as pyFM) uses the
 bounded resolvent mask of Ren et al. 2019 with exponent ``gamma``, with the same null space.
+The orientation term (Ren et al. 2018, as in pyFM; needs the meshes) uses
+``O^q = Φᵀ W_q Φ`` with ``(W_q g)(i) = Σ_{faces t ∋ i} (|t|/3) ⟨n_t × ∇d_q, ∇g⟩_t`` (per-face
+gradients of piecewise-linear functions), the reduced form of g ↦ ⟨n × ∇d_q, ∇g⟩; σ = +1 keeps
+the orientation, σ = −1 (``orientation="reversing"``) reverses it.
 
 The first column of C (the image of the constant function) is fixed analytically, as in pyFM:
 ``C[:, 0] = (s √(S_N / S_M), 0, …, 0)`` with ``S`` the areas and ``s`` the sign product of the
 two constant eigenvectors; only ``C[:, 1:]`` is optimized.
 
 Weights, as pyFM's ``FunctionalMapping.fit`` (v1.3, ``normalize_weights=True``): the user
-weights ``w = (descr, lap, comm)`` (pyFM defaults ``(1e-1, 1e-3, 1)``) are divided by their sum
-and by the canonical scale τ of each term, ``μ_t = w_t / τ_t``, where with ``m = min(k_M, k_N)``
-and the effective descriptor count ``p_eff = mean over shapes of (tr G)² / ‖G‖_F²``,
-``G = F[1:]ᵀ F[1:]``:
+weights ``w = (descr, lap, comm, orient)`` (pyFM defaults ``(1e-1, 1e-3, 1, 0)``) are divided by
+their sum and by the canonical scale τ of each term, ``μ_t = w_t / τ_t``, where with
+``m = min(k_M, k_N)`` and the effective descriptor count ``p_eff = mean over shapes of
+(tr G)² / ‖G‖_F²``, ``G = F[1:]ᵀ F[1:]``:
 
-    τ_descr = m ‖F_M[1:]‖² / (k_M p_eff)
-    τ_lap   = m Σ_ij M_ij / (k_M k_N)
-    τ_comm  = m Σ_q (k_N ‖D_M^q‖² + k_M ‖D_N^q‖² − 2 tr D_M^q tr D_N^q) / (k_M k_N p_eff)
+    τ_descr  = m ‖F_M[1:]‖² / (k_M p_eff)
+    τ_lap    = m Σ_ij M_ij / (k_M k_N)
+    τ_comm   = m Σ_q (k_N ‖D_M^q‖² + k_M ‖D_N^q‖² − 2 tr D_M^q tr D_N^q) / (k_M k_N p_eff)
+    τ_orient = m Σ_q (k_N ‖O_M^q‖² + k_M ‖O_N^q‖²) / (k_M k_N p_eff)
 
 (a non-positive τ is replaced by 1).  Descriptors are first L2-normalized per column in the
 area-weighted inner product (``normalize_descriptors=True``, pyFM's default).
 
 Solve.  E is quadratic in C, so its minimizer solves the normal equations ``H c = g`` of the
 stacked least-squares residual.  ``H`` is assembled exactly from Kronecker structure (row-major
-``vec``): ``H = μ_descr I ⊗ F_M F_Mᵀ + μ_lap diag(vec M) + μ_comm (I ⊗ S_M + S_N ⊗ I − 2 Σ_q D_N^q ⊗
-D_M^q)`` with ``S = Σ_q (D^q)²`` — the last sum is one GEMM ``(k_N², p) @ (p, k_M²)`` — and
-never the ``p k² × k²`` Jacobian.  The linear residual ``r(c) = H c − g`` is then solved by
-``optimistix.least_squares`` with Gauss–Newton and a lineax Cholesky solve (``H`` is symmetric
-positive definite): the first step is the exact solution, the next is an iterative-refinement
-step that certifies convergence.  Everything runs in one jitted call; a stack of pairs (stacked
-spectra and descriptors of equal shapes) is ``vmap``-ed.
+``vec``, ``(A ⊗ B)[(i,j),(a,b)] = A_ia B_jb``), never through the ``p k² × k²`` Jacobian:
+
+    H = μ_descr I ⊗ F_M F_Mᵀ + μ_lap diag(vec M)
+      + μ_comm   (I ⊗ Σ_q D_M^q D_M^q + Σ_q D_N^q D_N^q ⊗ I − 2 Σ_q D_N^q ⊗ D_M^q)
+      + μ_orient (I ⊗ Σ_q O_M O_Mᵀ + Σ_q O_NᵀO_N ⊗ I − Σ_q (O_N ⊗ O_M + O_Nᵀ ⊗ O_Mᵀ)),
+
+each ``Σ_q A_N^q ⊗ A_M^q`` being one GEMM ``(k_N², p) @ (p, k_M²)``.  The linear residual
+``r(c) = H c − g`` is solved by ``optimistix.least_squares`` with Gauss–Newton and a lineax
+Cholesky solve (H is symmetric positive definite): the first step is the exact solution, the
+next an iterative-refinement step that certifies convergence.  Everything runs in one jitted
+call; a stack of pairs (stacked spectra and descriptors of equal shapes) is ``vmap``-ed.
+
+Cost at k = 30, p = 200, n ≈ 7K: the operators D (one GEMM over the k(k+1)/2 eigenvector
+products, ``n k²/2`` memory) dominate with the dense solve of the ``k(k−1)``-unknown system;
+the orientation operators add one scatter pass over the faces and one GEMM ``(p, n) @ (n, k²)``.
 """
 
 from __future__ import annotations
@@ -54,23 +68,26 @@ import numpy as np
 import optimistix as optx
 
 from .errors import BSFError
+from .mesh import Mesh
 from .spectrum import Spectrum
 
-__all__ = ["estimate_fmap", "FmapWeights", "fmap_energy", "LAPLACIAN_MASKS"]
+__all__ = ["estimate_fmap", "FmapWeights", "fmap_energy", "LAPLACIAN_MASKS", "ORIENTATIONS"]
 
 LAPLACIAN_MASKS = ("resolvent", "plain")
+ORIENTATIONS = ("preserving", "reversing")
 
 
 class FmapWeights(NamedTuple):
-    """Relative weights of the three energy terms (pyFM's ``w_descr``, ``w_lap``, ``w_dcomm``).
+    """Relative weights of the energy terms (pyFM's ``w_descr``, ``w_lap``, ``w_dcomm``, ``w_orient``).
 
     Only their ratios matter: they are divided by their sum and, with ``normalize_weights``, by
-    each term's canonical scale (module doc).
+    each term's canonical scale (module doc).  ``orient > 0`` needs the meshes.
     """
 
     descr: float = 1e-1
     lap: float = 1e-3
     comm: float = 1.0
+    orient: float = 0.0
 
 
 # --------------------------------------------------------------------------- building blocks
@@ -115,25 +132,73 @@ def _effective_p(F):
     return jnp.where(denom > 0, jnp.trace(gram) ** 2 / jnp.where(denom > 0, denom, 1.0), 1.0)
 
 
-def _canonical_taus(F_m, F_n, D_m, D_n, mask):
-    """pyFM's canonical scales (τ_descr, τ_lap, τ_comm) of the three terms (module doc)."""
-    km, kn = F_m.shape[0], F_n.shape[0]
-    m = min(km, kn)
-    p_eff = jnp.maximum(0.5 * (_effective_p(F_m) + _effective_p(F_n)), 1e-12)
+# --------------------------------------------------------------------------- orientation term
 
-    def guard(v):
-        return jnp.where(v > 0, v, 1.0)
 
-    tau_descr = guard(m * jnp.sum(F_m[1:] ** 2) / km / p_eff)
-    tau_lap = guard(m * jnp.sum(mask) / (km * kn))
-    sq_m = jnp.sum(D_m**2, axis=(1, 2))
-    sq_n = jnp.sum(D_n**2, axis=(1, 2))
-    tr_m = jnp.trace(D_m, axis1=1, axis2=2)
-    tr_n = jnp.trace(D_n, axis1=1, axis2=2)
-    positive = jnp.sum(kn * sq_m + km * sq_n)
-    total = jnp.maximum(positive - 2 * jnp.sum(tr_m * tr_n), 0.0)
-    tau_comm = jnp.where(total <= 1e-12 * positive, 1.0, total * m / (km * kn) / p_eff)
-    return tau_descr, tau_lap, tau_comm
+class _Geometry(NamedTuple):
+    """Per-face data of a mesh for the orientation operators.
+
+    On face t with corners c, the piecewise-linear g has ∇g = Σ_c g_c ∇B_c (∇B_c = n × e_c / 2|t|,
+    e_c the edge opposite c, counter-clockwise), so for any f
+
+        ⟨n × ∇f, ∇g⟩_t = Σ_{c,c'} f_c K_t[c, c'] g_c',    K_t[c, c'] = ⟨n × ∇B_c, ∇B_c'⟩.
+    """
+
+    faces: np.ndarray  # (m, 3) int32
+    K: np.ndarray  # (m, 3, 3)
+    third_area: np.ndarray  # (m,) |t| / 3
+
+
+def _geometry(mesh: Mesh) -> _Geometry:
+    v, f = mesh.vertices, mesh.faces
+    p0, p1, p2 = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    cross = np.cross(p1 - p0, p2 - p0)
+    dbl = np.linalg.norm(cross, axis=1)
+    safe = np.where(dbl > 0, dbl, 1.0)
+    normals = cross / safe[:, None]
+    opp = np.stack([p2 - p1, p0 - p2, p1 - p0], axis=1)  # counter-clockwise
+    grad_basis = np.cross(normals[:, None, :], opp) / safe[:, None, None]
+    grad_basis[dbl == 0] = 0.0  # degenerate faces carry no gradient
+    rotated = np.cross(normals[:, None, :], grad_basis)
+    K = np.einsum("tcx,tdx->tcd", rotated, grad_basis)
+    return _Geometry(f.astype(np.int32), K, dbl / 6.0)
+
+
+#: Faces per block when assembling orientation operators (memory ``block × k²``).
+_FACE_BLOCK = 2048
+
+
+def _orient_ops(evecs, geom: _Geometry, d):
+    """``(p, k, k)`` reduced orientation operators O^q = Φᵀ W_q Φ (module doc).
+
+    O^q[a, b] = Σ_t (|t|/3) (Σ_c φ_a(t_c)) Σ_{c,c'} d_q(t_c) K_t[c, c'] φ_b(t_c'), which is linear
+    in d: gather Y[v, a, b] = Σ_{corners (t, c) at v} (|t|/3) s_a(t) (K_t φ_b(t))_c once (a scan
+    over face blocks), then O = dᵀ Y is one GEMM ``(p, n) @ (n, k²)``.
+    """
+    n, k = evecs.shape
+    m = geom.faces.shape[0]
+    n_blocks = -(-m // _FACE_BLOCK)
+    pad = n_blocks * _FACE_BLOCK - m
+
+    def blocks(x):  # padded faces have zero area and K = 0: they add nothing
+        x = jnp.pad(x, [(0, pad)] + [(0, 0)] * (x.ndim - 1))
+        return x.reshape(n_blocks, _FACE_BLOCK, *x.shape[1:])
+
+    def one(Y, blk):
+        faces, K, third = blk
+        phi = evecs[faces]  # (T, 3, k)
+        weight = third[:, None] * jnp.sum(phi, axis=1)  # (T, k): (|t|/3) Σ_c φ_a(t_c)
+        for c in range(3):  # the three corners of every face of the block
+            g = sum(K[:, c, e, None] * phi[:, e, :] for e in range(3))  # (T, k): (K_t φ_b)_c
+            Y = Y.at[faces[:, c]].add(weight[:, :, None] * g[:, None, :])
+        return Y, None
+
+    Y, _ = jax.lax.scan(one, jnp.zeros((n, k, k), evecs.dtype),
+                        (blocks(geom.faces), blocks(geom.K), blocks(geom.third_area)))
+    return (d.T @ Y.reshape(n, k * k)).reshape(-1, k, k)
+
+
+# --------------------------------------------------------------------------- energy and solve
 
 
 class _Problem(NamedTuple):
@@ -141,57 +206,113 @@ class _Problem(NamedTuple):
     F_n: jax.Array  # (k_N, p)
     D_m: jax.Array  # (p, k_M, k_M)
     D_n: jax.Array  # (p, k_N, k_N)
+    O_m: jax.Array | None  # (p, k_M, k_M) orientation operators, or None
+    O_n: jax.Array | None  # (p, k_N, k_N), sign σ included
     mask: jax.Array  # (k_N, k_M)
-    mu: jax.Array  # (3,) μ_descr, μ_lap, μ_comm
+    mu: jax.Array  # (4,) μ_descr, μ_lap, μ_comm, μ_orient
     c00: jax.Array  # fixed C[0, 0]
 
 
-def _setup(evals_m, evecs_m, mass_m, evals_n, evecs_n, mass_n, d_m, d_n, w, *, lap_kind, gamma,
-           normalize_descriptors, normalize_weights) -> _Problem:
+class _Shape(NamedTuple):
+    evals: jax.Array
+    evecs: jax.Array
+    mass: jax.Array
+    descr: jax.Array
+    geom: _Geometry | None
+
+
+def _taus(pb: _Problem):
+    """pyFM's canonical scales (τ_descr, τ_lap, τ_comm, τ_orient) of the terms (module doc)."""
+    km, kn = pb.F_m.shape[0], pb.F_n.shape[0]
+    m = min(km, kn)
+    p_eff = jnp.maximum(0.5 * (_effective_p(pb.F_m) + _effective_p(pb.F_n)), 1e-12)
+
+    def guard(v):
+        return jnp.where(v > 0, v, 1.0)
+
+    def op_tau(A, B, skew):
+        positive = jnp.sum(kn * jnp.sum(A**2, axis=(1, 2)) + km * jnp.sum(B**2, axis=(1, 2)))
+        total = positive
+        if not skew:
+            total = total - 2 * jnp.sum(jnp.trace(A, axis1=1, axis2=2)
+                                        * jnp.trace(B, axis1=1, axis2=2))
+        total = jnp.maximum(total, 0.0)
+        return jnp.where(total <= 1e-12 * positive, 1.0, total * m / (km * kn) / p_eff)
+
+    tau_descr = guard(m * jnp.sum(pb.F_m[1:] ** 2) / km / p_eff)
+    tau_lap = guard(m * jnp.sum(pb.mask) / (km * kn))
+    tau_comm = op_tau(pb.D_m, pb.D_n, skew=False)
+    tau_orient = jnp.ones(()) if pb.O_m is None else op_tau(pb.O_m, pb.O_n, skew=True)
+    return jnp.stack([tau_descr, tau_lap, tau_comm, tau_orient.astype(tau_descr.dtype)])
+
+
+def _setup(sm: _Shape, sn: _Shape, w, *, lap_kind, gamma, normalize_descriptors,
+           normalize_weights, orient_sign) -> _Problem:
+    d_m, d_n = sm.descr, sn.descr
     if normalize_descriptors:
-        d_m = _normalize_columns(d_m, mass_m)
-        d_n = _normalize_columns(d_n, mass_n)
-    F_m = evecs_m.T @ (mass_m[:, None] * d_m)
-    F_n = evecs_n.T @ (mass_n[:, None] * d_n)
-    D_m = _mult_ops(evecs_m, mass_m, d_m)
-    D_n = _mult_ops(evecs_n, mass_n, d_n)
-    mask = _lap_mask(evals_m, evals_n, lap_kind, gamma)
+        d_m = _normalize_columns(d_m, sm.mass)
+        d_n = _normalize_columns(d_n, sn.mass)
+    F_m = sm.evecs.T @ (sm.mass[:, None] * d_m)
+    F_n = sn.evecs.T @ (sn.mass[:, None] * d_n)
+    D_m = _mult_ops(sm.evecs, sm.mass, d_m)
+    D_n = _mult_ops(sn.evecs, sn.mass, d_n)
+    O_m = O_n = None
+    if sm.geom is not None:
+        O_m = _orient_ops(sm.evecs, sm.geom, d_m)
+        O_n = orient_sign * _orient_ops(sn.evecs, sn.geom, d_n)
+    mask = _lap_mask(sm.evals, sn.evals, lap_kind, gamma)
+    sign = jnp.sign(sm.evecs[0, 0] * sn.evecs[0, 0])
+    c00 = jnp.where(sign == 0, 1.0, sign) * jnp.sqrt(jnp.sum(sn.mass) / jnp.sum(sm.mass))
     w = w / jnp.sum(w)
+    pb = _Problem(F_m, F_n, D_m, D_n, O_m, O_n, mask, w, c00)
     if normalize_weights:
-        w = w / jnp.stack(_canonical_taus(F_m, F_n, D_m, D_n, mask))
-    sign = jnp.sign(evecs_m[0, 0] * evecs_n[0, 0])
-    c00 = jnp.where(sign == 0, 1.0, sign) * jnp.sqrt(jnp.sum(mass_n) / jnp.sum(mass_m))
-    return _Problem(F_m, F_n, D_m, D_n, mask, w, c00)
+        pb = pb._replace(mu=w / _taus(pb))
+    return pb
+
+
+def _kron4(A, B):
+    """(A ⊗ B) as a 4-index array [i, j, a, b] = A[i, a] B[j, b] (row-major vec layout)."""
+    return jnp.einsum("ia,jb->ijab", A, B)
 
 
 def _normal_equations(pb: _Problem):
     """Gram ``H`` ``(k_N, k_M, k_N, k_M)`` and right-hand side ``g`` ``(k_N, k_M)`` of E."""
-    mu_d, mu_l, mu_c = pb.mu
+    mu_d, mu_l, mu_c, mu_o = pb.mu
     kn, km = pb.mask.shape
     eye_n = jnp.eye(kn, dtype=pb.mask.dtype)
     eye_m = jnp.eye(km, dtype=pb.mask.dtype)
-    G_m = pb.F_m @ pb.F_m.T
-    S_m = jnp.einsum("qij,qjk->ik", pb.D_m, pb.D_m)
-    S_n = jnp.einsum("qij,qjk->ik", pb.D_n, pb.D_n)
     p = pb.D_m.shape[0]
-    # Σ_q D_N^q[i, a] D_M^q[j, b] as one GEMM, then (i, a, j, b) → (i, j, a, b).
-    cross = (pb.D_n.reshape(p, kn * kn).T @ pb.D_m.reshape(p, km * km))
-    cross = cross.reshape(kn, kn, km, km).transpose(0, 2, 1, 3)
-    H = (jnp.einsum("ia,jb->ijab", eye_n, mu_d * G_m + mu_c * S_m)
-         + jnp.einsum("ia,jb->ijab", mu_c * S_n, eye_m)
-         - 2 * mu_c * cross
+
+    def cross(A_n, A_m):  # Σ_q A_N^q[i, a] A_M^q[j, b] as one GEMM, then (i,a,j,b) → (i,j,a,b)
+        out = A_n.reshape(p, kn * kn).T @ A_m.reshape(p, km * km)
+        return out.reshape(kn, kn, km, km).transpose(0, 2, 1, 3)
+
+    right_m = mu_d * pb.F_m @ pb.F_m.T + mu_c * jnp.einsum("qij,qkj->ik", pb.D_m, pb.D_m)
+    left_n = mu_c * jnp.einsum("qji,qjk->ik", pb.D_n, pb.D_n)
+    H = -2 * mu_c * cross(pb.D_n, pb.D_m)  # D symmetric: both cross terms coincide
+    if pb.O_m is not None:
+        right_m = right_m + mu_o * jnp.einsum("qij,qkj->ik", pb.O_m, pb.O_m)
+        left_n = left_n + mu_o * jnp.einsum("qji,qjk->ik", pb.O_n, pb.O_n)
+        H = H - mu_o * (cross(pb.O_n, pb.O_m)
+                        + cross(jnp.swapaxes(pb.O_n, 1, 2), jnp.swapaxes(pb.O_m, 1, 2)))
+    H = (H + _kron4(eye_n, right_m) + _kron4(left_n, eye_m)
          + mu_l * jnp.einsum("ij,ia,jb->ijab", pb.mask, eye_n, eye_m))
     g = mu_d * pb.F_n @ pb.F_m.T
     return H, g
 
 
 def _energy(C, pb: _Problem):
-    mu_d, mu_l, mu_c = pb.mu
-    e_descr = 0.5 * jnp.sum((C @ pb.F_m - pb.F_n) ** 2)
-    e_lap = 0.5 * jnp.sum(pb.mask * C * C)
-    comm = jnp.einsum("ij,qjk->qik", C, pb.D_m) - jnp.einsum("qij,jk->qik", pb.D_n, C)
-    e_comm = 0.5 * jnp.sum(comm * comm)
-    return mu_d * e_descr + mu_l * e_lap + mu_c * e_comm
+    mu_d, mu_l, mu_c, mu_o = pb.mu
+
+    def comm(A_m, A_n):
+        r = jnp.einsum("ij,qjk->qik", C, A_m) - jnp.einsum("qij,jk->qik", A_n, C)
+        return 0.5 * jnp.sum(r * r)
+
+    e = (mu_d * 0.5 * jnp.sum((C @ pb.F_m - pb.F_n) ** 2)
+         + mu_l * 0.5 * jnp.sum(pb.mask * C * C) + mu_c * comm(pb.D_m, pb.D_n))
+    if pb.O_m is not None:
+        e = e + mu_o * comm(pb.O_m, pb.O_n)
+    return e
 
 
 def _residual(y, args):
@@ -219,33 +340,37 @@ def _solve(pb: _Problem, *, rtol, atol, max_steps):
     return jnp.concatenate([first, free], axis=1)
 
 
-@functools.partial(jax.jit, static_argnames=("lap_kind", "normalize_descriptors",
-                                             "normalize_weights", "max_steps", "batched"))
-def _estimate_jit(evals_m, evecs_m, mass_m, evals_n, evecs_n, mass_n, d_m, d_n, w, gamma, *,
-                  lap_kind, normalize_descriptors, normalize_weights, max_steps, batched):
+def _cast(shape: _Shape, dt) -> _Shape:
+    """Float arrays in the working dtype (the spectra arrive as float64 numpy), indices int32."""
+    return jax.tree.map(lambda x: jnp.asarray(
+        x, jnp.int32 if np.issubdtype(np.result_type(x), np.integer) else dt), shape)
+
+
+_STATIC = ("lap_kind", "normalize_descriptors", "normalize_weights", "orient_sign")
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC + ("max_steps", "batched"))
+def _estimate_jit(sm: _Shape, sn: _Shape, w, gamma, *, lap_kind, normalize_descriptors,
+                  normalize_weights, orient_sign, max_steps, batched):
     dt = jnp.result_type(float)
     rtol, atol = (1e-10, 1e-12) if dt == jnp.float64 else (1e-4, 1e-6)
 
-    def one(em, vm, am, en, vn, an, dm, dn):
-        args = [jnp.asarray(x, dt) for x in (em, vm, am, en, vn, an, dm, dn)]
-        pb = _setup(*args, jnp.asarray(w, dt), lap_kind=lap_kind, gamma=jnp.asarray(gamma, dt),
-                    normalize_descriptors=normalize_descriptors,
-                    normalize_weights=normalize_weights)
+    def one(a, b):
+        pb = _setup(_cast(a, dt), _cast(b, dt), jnp.asarray(w, dt), lap_kind=lap_kind,
+                    gamma=jnp.asarray(gamma, dt), normalize_descriptors=normalize_descriptors,
+                    normalize_weights=normalize_weights, orient_sign=orient_sign)
         return _solve(pb, rtol=rtol, atol=atol, max_steps=max_steps)
 
-    f = jax.vmap(one) if batched else one
-    return f(evals_m, evecs_m, mass_m, evals_n, evecs_n, mass_n, d_m, d_n)
+    return (jax.vmap(one) if batched else one)(sm, sn)
 
 
-@functools.partial(jax.jit, static_argnames=("lap_kind", "normalize_descriptors",
-                                             "normalize_weights"))
-def _energy_jit(C, evals_m, evecs_m, mass_m, evals_n, evecs_n, mass_n, d_m, d_n, w, gamma, *,
-                lap_kind, normalize_descriptors, normalize_weights):
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _energy_jit(C, sm: _Shape, sn: _Shape, w, gamma, *, lap_kind, normalize_descriptors,
+                normalize_weights, orient_sign):
     dt = jnp.result_type(float)
-    args = [jnp.asarray(x, dt) for x in (evals_m, evecs_m, mass_m, evals_n, evecs_n, mass_n,
-                                         d_m, d_n)]
-    pb = _setup(*args, jnp.asarray(w, dt), lap_kind=lap_kind, gamma=jnp.asarray(gamma, dt),
-                normalize_descriptors=normalize_descriptors, normalize_weights=normalize_weights)
+    pb = _setup(_cast(sm, dt), _cast(sn, dt), jnp.asarray(w, dt), lap_kind=lap_kind,
+                gamma=jnp.asarray(gamma, dt), normalize_descriptors=normalize_descriptors,
+                normalize_weights=normalize_weights, orient_sign=orient_sign)
     return _energy(jnp.asarray(C, dt), pb)
 
 
@@ -265,12 +390,32 @@ def _weights_array(weights) -> np.ndarray:
         try:
             weights = FmapWeights(*weights)
         except TypeError as exc:
-            raise BSFError(f"weights must be FmapWeights, a mapping or a 3-sequence "
-                           f"(descr, lap, comm), got {weights!r}") from exc
+            raise BSFError(f"weights must be FmapWeights, a mapping or a sequence "
+                           f"(descr, lap, comm[, orient]), got {weights!r}") from exc
     w = np.asarray(weights, dtype=np.float64)
     if not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
         raise BSFError(f"weights must be finite, non-negative and not all 0, got {weights}")
     return w
+
+
+def _geometries(mesh, spectrum_shape, name: str):
+    """Per-face geometry of one mesh, or stacked for a sequence of meshes (batched)."""
+    *batch, n, _ = spectrum_shape
+    meshes = [mesh] if not batch else (list(mesh) if isinstance(mesh, (list, tuple)) else [mesh])
+    if batch and len(meshes) != batch[0]:
+        raise BSFError(f"{name} must be a sequence of {batch[0]} meshes for stacked spectra, got "
+                       f"{len(meshes)}")
+    for m in meshes:
+        if not isinstance(m, Mesh):
+            raise BSFError(f"{name} must be a bsfjax.Mesh (or a sequence of them for stacked "
+                           f"spectra), got {type(m).__name__}")
+        if m.n_vertices != n:
+            raise BSFError(f"{name} has {m.n_vertices} vertices but its spectrum has {n}")
+    if len({m.n_faces for m in meshes}) != 1:
+        raise BSFError(f"{name}: stacked meshes must have equal face counts, got "
+                       f"{[m.n_faces for m in meshes]}")
+    geoms = [_geometry(m) for m in meshes]
+    return geoms[0] if not batch else jax.tree.map(lambda *x: np.stack(x), *geoms)
 
 
 def _prepare(source_spectrum, target_spectrum, source_descr, target_descr, k):
@@ -292,9 +437,10 @@ def _prepare(source_spectrum, target_spectrum, source_descr, target_descr, k):
     if not 2 <= km <= sm[-1] or not 2 <= kn <= sn[-1]:
         raise BSFError(f"k=(k_source={km}, k_target={kn}) must be in [2, available]: source has "
                        f"{sm[-1]} eigenpairs, target has {sn[-1]}")
-    dm, dn = np.asarray(source_descr), np.asarray(target_descr)
     want = 3 if batched else 2
-    for d, s, name in ((dm, sm, "source_descr"), (dn, sn, "target_descr")):
+    out = []
+    for d, s, name in ((source_descr, sm, "source_descr"), (target_descr, sn, "target_descr")):
+        d = np.asarray(d)
         if d.ndim == want - 1:
             d = d[..., None]
         if d.ndim != want or d.shape[:-1] != s[:-1]:
@@ -302,21 +448,34 @@ def _prepare(source_spectrum, target_spectrum, source_descr, target_descr, k):
                            f"spectrum), got {np.shape(d)}")
         if not np.issubdtype(d.dtype, np.number) or not np.all(np.isfinite(d)):
             raise BSFError(f"{name} must be finite numbers (found NaN/inf or a non-numeric dtype)")
-    if dm.ndim == want - 1:
-        dm = dm[..., None]
-    if dn.ndim == want - 1:
-        dn = dn[..., None]
+        out.append(d)
+    dm, dn = out
     if dm.shape[-1] != dn.shape[-1]:
         raise BSFError(f"source_descr and target_descr must have the same number of descriptors "
                        f"(columns), got {dm.shape[-1]} and {dn.shape[-1]}")
     return batched, km, kn, dm, dn
 
 
-def _check_options(laplacian, gamma):
+def _options(laplacian, gamma, orientation, w, source_mesh, target_mesh, sm_shape, sn_shape):
     if laplacian not in LAPLACIAN_MASKS:
         raise BSFError(f"laplacian must be one of {LAPLACIAN_MASKS}, got {laplacian!r}")
     if not np.isfinite(gamma) or not 0 < gamma <= 1:
         raise BSFError(f"gamma must be in (0, 1], got {gamma!r}")
+    if orientation not in ORIENTATIONS:
+        raise BSFError(f"orientation must be one of {ORIENTATIONS}, got {orientation!r}")
+    if w[3] == 0:
+        return None, None
+    if source_mesh is None or target_mesh is None:
+        raise BSFError("weights.orient > 0 needs source_mesh and target_mesh (the orientation "
+                       "term uses per-face gradients)")
+    return (_geometries(source_mesh, sm_shape, "source_mesh"),
+            _geometries(target_mesh, sn_shape, "target_mesh"))
+
+
+def _shapes(source_spectrum, target_spectrum, km, kn, dm, dn, gm, gn):
+    sm, sn = source_spectrum, target_spectrum
+    return (_Shape(sm.evals[..., :km], sm.evecs[..., :km], sm.mass, dm, gm),
+            _Shape(sn.evals[..., :kn], sn.evecs[..., :kn], sn.mass, dn, gn))
 
 
 # --------------------------------------------------------------------------- public API
@@ -324,7 +483,8 @@ def _check_options(laplacian, gamma):
 
 def estimate_fmap(source_spectrum: Spectrum, target_spectrum: Spectrum, source_descr,
                   target_descr, *, k=30, weights=None, laplacian: str = "resolvent",
-                  gamma: float = 0.5, normalize_descriptors: bool = True,
+                  gamma: float = 0.5, source_mesh=None, target_mesh=None,
+                  orientation: str = "preserving", normalize_descriptors: bool = True,
                   normalize_weights: bool = True, max_steps: int = 8) -> jax.Array:
     """Functional map ``C`` ``(k_N, k_M)`` from source to target minimizing the energy above.
 
@@ -336,12 +496,15 @@ def estimate_fmap(source_spectrum: Spectrum, target_spectrum: Spectrum, source_d
             ``jnp.concatenate([wks(s), wks(s, landmarks=lm)], axis=1)``.
         target_descr: ``(n_N, p)`` (or ``(B, n_N, p)``), column ``q`` matching column ``q`` of
             ``source_descr``.
-        k: map size, an int or ``(k_source, k_target)``.
-        weights: ``FmapWeights(descr, lap, comm)``, a mapping with those keys or a 3-sequence;
-            default pyFM's ``(1e-1, 1e-3, 1)``.
+        k: map size, an int or ``(k_source, k_target)`` (pyFM's ``K``).
+        weights: ``FmapWeights(descr, lap, comm, orient)``, a mapping with those keys or a
+            sequence; default pyFM's ``(1e-1, 1e-3, 1, 0)``.
         laplacian: ``"resolvent"`` (Ren et al. 2019, pyFM's default) or ``"plain"``
             (λ differences squared).
         gamma: resolvent exponent in (0, 1].
+        source_mesh, target_mesh: the meshes (sequences of meshes for stacked spectra), needed
+            only when ``weights.orient > 0``.
+        orientation: ``"preserving"`` or ``"reversing"`` (sign σ of the orientation term).
         normalize_descriptors: L2-normalize descriptor columns (area-weighted) first.
         normalize_weights: divide each weight by its term's canonical scale (module doc).
         max_steps: Gauss–Newton step limit (2–3 are used; the problem is linear).
@@ -352,19 +515,21 @@ def estimate_fmap(source_spectrum: Spectrum, target_spectrum: Spectrum, source_d
     batched, km, kn, dm, dn = _prepare(source_spectrum, target_spectrum, source_descr,
                                        target_descr, k)
     w = _weights_array(weights)
-    _check_options(laplacian, gamma)
+    gm, gn = _options(laplacian, gamma, orientation, w, source_mesh, target_mesh,
+                      np.shape(source_spectrum.evecs), np.shape(target_spectrum.evecs))
     if not isinstance(max_steps, (int, np.integer)) or max_steps < 2:
         raise BSFError(f"max_steps must be an integer >= 2, got {max_steps!r}")
-    sm, sn = source_spectrum, target_spectrum
-    return _estimate_jit(sm.evals[..., :km], sm.evecs[..., :km], sm.mass, sn.evals[..., :kn],
-                         sn.evecs[..., :kn], sn.mass, dm, dn, w, float(gamma),
-                         lap_kind=laplacian, normalize_descriptors=bool(normalize_descriptors),
-                         normalize_weights=bool(normalize_weights), max_steps=int(max_steps),
-                         batched=batched)
+    sm, sn = _shapes(source_spectrum, target_spectrum, km, kn, dm, dn, gm, gn)
+    return _estimate_jit(sm, sn, w, float(gamma), lap_kind=laplacian,
+                         normalize_descriptors=bool(normalize_descriptors),
+                         normalize_weights=bool(normalize_weights),
+                         orient_sign=1.0 if orientation == "preserving" else -1.0,
+                         max_steps=int(max_steps), batched=batched)
 
 
 def fmap_energy(C, source_spectrum: Spectrum, target_spectrum: Spectrum, source_descr,
                 target_descr, *, weights=None, laplacian: str = "resolvent", gamma: float = 0.5,
+                source_mesh=None, target_mesh=None, orientation: str = "preserving",
                 normalize_descriptors: bool = True, normalize_weights: bool = True) -> jax.Array:
     """The energy E(C) that :func:`estimate_fmap` minimizes (single pair), for diagnostics."""
     shape = np.shape(C)
@@ -375,9 +540,10 @@ def fmap_energy(C, source_spectrum: Spectrum, target_spectrum: Spectrum, source_
     if batched:
         raise BSFError("fmap_energy takes a single pair, not stacked spectra")
     w = _weights_array(weights)
-    _check_options(laplacian, gamma)
-    sm, sn = source_spectrum, target_spectrum
-    return _energy_jit(C, sm.evals[:km], sm.evecs[:, :km], sm.mass, sn.evals[:kn],
-                       sn.evecs[:, :kn], sn.mass, dm, dn, w, float(gamma), lap_kind=laplacian,
+    gm, gn = _options(laplacian, gamma, orientation, w, source_mesh, target_mesh,
+                      np.shape(source_spectrum.evecs), np.shape(target_spectrum.evecs))
+    sm, sn = _shapes(source_spectrum, target_spectrum, km, kn, dm, dn, gm, gn)
+    return _energy_jit(C, sm, sn, w, float(gamma), lap_kind=laplacian,
                        normalize_descriptors=bool(normalize_descriptors),
-                       normalize_weights=bool(normalize_weights))
+                       normalize_weights=bool(normalize_weights),
+                       orient_sign=1.0 if orientation == "preserving" else -1.0)

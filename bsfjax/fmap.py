@@ -273,19 +273,26 @@ def zoomout(C, source_spectrum: Spectrum, target_spectrum: Spectrum, k, *, step:
     Args:
         C: ``(k₀_N, k₀_M)`` initial functional map.
         source_spectrum, target_spectrum: with at least ``k`` eigenpairs each.
-        k: final size, an int (square map) or ``(k_N, k_M)``.
+        k: final size, an int (square map) or ``(k_source, k_target)`` as in pyFM (the map is
+            then ``(k_target, k_source)``).
         step: basis functions added per iteration (pyFM's ``step``).
         adjoint, chunk_size: as in :func:`fmap_to_p2p`.
 
     Returns:
-        ``(k_N, k_M)`` refined functional map; ``fmap_to_p2p`` gives its point map.
+        ``(k_target, k_source)`` refined functional map; ``fmap_to_p2p`` gives its point map.
     """
     _check_spectrum(source_spectrum, "source_spectrum")
     _check_spectrum(target_spectrum, "target_spectrum")
     kn0, km0 = _check_fmap(C, source_spectrum.k, target_spectrum.k)
-    kn, km = (k, k) if isinstance(k, (int, np.integer)) and not isinstance(k, bool) else tuple(k)
-    if not all(isinstance(v, (int, np.integer)) for v in (kn, km)):
-        raise BSFError(f"k must be an int or a pair of ints (k_target, k_source), got {k!r}")
+    if isinstance(k, (int, np.integer)) and not isinstance(k, bool):
+        km = kn = k
+    else:
+        try:
+            km, kn = k
+        except (TypeError, ValueError) as exc:
+            raise BSFError(f"k must be an int or a pair (k_source, k_target), got {k!r}") from exc
+    if not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in (kn, km)):
+        raise BSFError(f"k must be an int or a pair of ints (k_source, k_target), got {k!r}")
     if kn < kn0 or km < km0:
         raise BSFError(f"k={k!r} must be at least the size of C {np.shape(C)}")
     if kn > target_spectrum.k or km > source_spectrum.k:

@@ -60,8 +60,8 @@ def stack_spectra(spectra: Sequence[Spectrum]) -> Spectrum:
     return jax.tree.map(lambda *x: np.stack(x), *spectra)
 
 
-@partial(jax.jit, static_argnames=("method", "options", "tau_convention"))
-def _pairs_kernel(source, target, C, centers, F, taus, gammas, *, method, options, tau_convention):
+@partial(jax.jit, static_argnames=("taus", "gammas", "method", "options", "tau_convention"))
+def _pairs_kernel(source, target, C, centers, F, *, taus, gammas, method, options, tau_convention):
     def one(src, tgt, c, ctr, f):
         frame = build_frame(src, ctr, taus, gammas, tau_convention=tau_convention)
         tframe = transfer_frame(frame, c, tgt)
@@ -91,7 +91,12 @@ def transfer_pairs(sources: Spectrum | Sequence[Spectrum], targets: Spectrum | S
 
     Shapes are static, so a new ``(P, n_M, n_N, k, m)`` compiles once and is then cached by
     ``jax.jit``; pairs of different vertex counts go into separate calls (one compiled function
-    per shape).  See :func:`bsfjax.evaluate_pairs` for lists of pairs of mixed sizes.
+    per shape).
+
+    With several JAX devices (GPUs, or CPU devices from
+    ``XLA_FLAGS=--xla_force_host_platform_device_count=N``) the pair axis is sharded across them
+    automatically (``jax.sharding``, a 1-D device mesh named ``"pairs"``): no code change, same
+    results.
     """
     src = stack_spectra(sources) if not isinstance(sources, Spectrum) else sources
     tgt = stack_spectra(targets) if not isinstance(targets, Spectrum) else targets
@@ -120,8 +125,39 @@ def transfer_pairs(sources: Spectrum | Sequence[Spectrum], targets: Spectrum | S
     first = jax.tree.map(lambda x: x[0], src)
     frame0 = build_frame(first, centers[0], taus, gamma, tau_convention=tau_convention)
     encode(frame0.atoms, f[0, :1], method, **options)
-    gammas = frame0.gammas.reshape(-1, centers.shape[1])[:, 0]
-    return _pairs_kernel(src, tgt, jnp.asarray(C), jnp.asarray(centers), jnp.asarray(f),
-                         jnp.asarray(frame0.taus.reshape(-1, centers.shape[1])[:, 0]), gammas,
-                         method=method, options=tuple(sorted(options.items())),
-                         tau_convention=tau_convention)
+    n_c = centers.shape[1]
+    # per-scale τ and γ as static tuples (build_frame validates concrete values)
+    per_scale_taus = tuple(float(t) for t in np.asarray(frame0.taus).reshape(-1, n_c)[:, 0])
+    per_scale_gammas = tuple(float(g) for g in np.asarray(frame0.gammas).reshape(-1, n_c)[:, 0])
+    args = (src, tgt, C, centers, f)
+    devices = jax.devices()
+    if len(devices) > 1:
+        args = _shard_pairs(args, devices)
+    out = _pairs_kernel(*args, taus=per_scale_taus, gammas=per_scale_gammas,
+                        method=method, options=tuple(sorted(options.items())),
+                        tau_convention=tau_convention)
+    return jax.tree.map(lambda x: x[:P], out)
+
+
+def _shard_pairs(args, devices):
+    """Pad the pair axis to a multiple of the device count and shard it across ``devices``.
+
+    Pairs are independent, so GSPMD partitions the vmapped kernel without communication; each
+    device computes whole pairs, which keeps results identical to a single-device run.  Padding
+    repeats the last pair and is sliced off by the caller.
+    """
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    d = len(devices)
+    P = np.shape(args[2])[0]
+    pad = (-P) % d
+
+    def place(x):
+        x = jnp.asarray(x)
+        if pad:
+            x = jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)], axis=0)
+        spec = PartitionSpec("pairs", *([None] * (x.ndim - 1)))
+        return jax.device_put(x, NamedSharding(mesh, spec))
+
+    mesh = Mesh(np.asarray(devices), ("pairs",))
+    return jax.tree.map(place, args)

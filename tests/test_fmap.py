@@ -177,7 +177,7 @@ def test_zoomout_rectangular_schedule(small_pair):
     _, _, sm, sn = small_pair
     gt = np.arange(sn.n_vertices)
     C0 = fmap_from_p2p(sm.truncate(8), sn.truncate(5), gt)
-    C = zoomout(C0, sm, sn, (20, 23), step=5)
+    C = zoomout(C0, sm, sn, (23, 20), step=5)  # (k_source, k_target), as pyFM's K
     assert C.shape == (20, 23)
 
 
