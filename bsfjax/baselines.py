@@ -10,8 +10,9 @@ Every method maps functions ``F`` ``(m, n_M)`` on a source shape ``M`` to an app
             No approximation (it would be ``f`` itself).
 ``"prod"``  Nogneng et al. 2018: ``f ≈ Σ_{i≤j} c_ij φ_i φ_j`` (the ``k(k+1)/2`` products,
             area-weighted truncated least squares, ``Params.prod_rcond``), transferred by
-            the *extended* map ``φ_i φ_j ↦ (Cφ_i)(Cφ_j)``.  With ``S`` the symmetric ``k × k`` matrix of the
-            coefficients (``S_ii = c_ii``, ``S_ij = S_ji = c_ij / 2``) this is
+            the *extended* map ``φ_i φ_j ↦ (Cφ_i)(Cφ_j)``.  With ``S`` the symmetric
+            ``k × k`` matrix of the coefficients (``S_ii = c_ii``, ``S_ij = S_ji = c_ij / 2``)
+            this is
             ``f_N(x) = ψ(x)ᵀ (C S Cᵀ) ψ(x)`` — the extended map never has to be formed.
 ``"geod"``  a frame of geodesic-ball indicators around the BSF centres at 3 radii (one per
             BSF scale: ``r_s = √(ā_s / π)``, the radius of a flat disc with the mean area

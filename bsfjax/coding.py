@@ -21,8 +21,9 @@ Bα)ᵢ²``, e.g. the area-weighted error ``‖·‖²_A`` of the paper's metric
 this is plain coding after scaling the rows of ``B`` and ``f`` by ``√wᵢ``.
 
 Everything after input validation is one jitted function with static shapes: a batch of ``m``
-functions is coded together, and :func:`encode` also works under :func:`jax.vmap` and
-:func:`jax.jit` (value checks that need concrete data are skipped for traced inputs).
+functions is coded together, and :func:`encode` also works under :func:`jax.vmap` (over
+functions, or over a stack of frames of equal shape) and :func:`jax.jit` (value checks that
+need concrete data are skipped for traced inputs; shape checks still run).
 """
 
 from __future__ import annotations
@@ -66,9 +67,8 @@ class CodingInfo(NamedTuple):
         converged: ``(...,)`` bool.  ``"omp"``: ``S`` atoms were selected, or the residual
             became orthogonal to every atom (nothing left to fit); false when OMP stopped
             early because the next atom was linearly dependent on the selected ones.
-            ``"omp_error"``: the bound ``‖f − Bα‖² ≤ ε`` was met.  ``"lasso"``: the proximal
-            gradient fixed-point residual reached ``tol`` within ``maxiter``.
-            ``"lstsq"``: always true.
+            ``"omp_error"``: the bound ``‖f − Bα‖² ≤ ε`` was met.  ``"lasso"``: the last
+            FISTA step met ``tol`` within ``maxiter`` iterations.  ``"lstsq"``: always true.
     """
 
     n_atoms: jax.Array
@@ -120,11 +120,12 @@ def _float_dtype(*arrays):
     return jax.dtypes.canonicalize_dtype(dt)
 
 
-def _check_int(name, value, lo, hi):
+def _check_int(name, value, lo, hi, hi_label=None):
+    bounds = f"[{lo}, {hi_label or hi}]"
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise BSFError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
+        raise BSFError(f"{name} must be an integer in {bounds}, got {value!r}")
     if not lo <= value <= hi:
-        raise BSFError(f"{name} must be in [{lo}, q={hi}], got {value}")
+        raise BSFError(f"{name} must be in {bounds}, got {value}")
     return int(value)
 
 
@@ -164,9 +165,9 @@ def _check_options(method, options, q, lead_shape):
                            f"{opts['precompute']!r}")
         static["precompute"] = opts["precompute"]
     if method == "omp":
-        static["n_steps"] = _check_int("sparsity", opts["sparsity"], 1, q)
+        static["n_steps"] = _check_int("sparsity", opts["sparsity"], 1, q, f"q={q}")
     if method == "omp_error":
-        static["n_steps"] = _check_int("max_atoms", opts["max_atoms"], 1, q)
+        static["n_steps"] = _check_int("max_atoms", opts["max_atoms"], 1, q, f"q={q}")
         eps = opts["eps"]
         if eps is None or (isinstance(eps, str) and eps == "spams"):
             static["eps_mode"] = "relative" if eps is None else "spams"
@@ -270,10 +271,10 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
             (duplicate atoms); the minimum-norm solution is returned.
 
             ``"omp"`` — ``sparsity`` ``S`` (default ``min(10, q)``, ``1 ≤ S ≤ q``): at most
-            ``S`` atoms;
-            ``precompute`` (``"auto"``): form the full ``q × q`` Gram matrix (``True``) or only
-            the Gram rows of the selected atoms (``False``, ``O(n q)`` per step and function);
-            ``"auto"`` forms it when ``batch · S ≥ q``.
+            ``S`` atoms; ``precompute`` (``"auto"``): form the full ``q × q`` Gram matrix
+            (``True``, ``O(n q²)`` once) or only the Gram rows of the selected atoms
+            (``False``, ``O(n q)`` per step and function); ``"auto"`` forms it when
+            ``batch · S ≥ q``.
 
             ``"omp_error"`` — ``eps``: bound on the **squared** residual ``‖f − Bα‖² ≤ ε``
             (SPAMS' convention), a number or an array broadcasting to the batch shape ``...``.
@@ -282,8 +283,9 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
             scale of ``f``, to the mesh resolution and to ``weights``.  ``eps="spams"`` uses
             ``ε = ‖f‖/10`` on the squared residual, as a literal SPAMS call ``mexOMP(…,
             eps=‖f‖/10)`` would (not scale invariant: stricter for larger ``‖f‖``).  At least
-            one atom is selected unless ``‖f‖² ≤ ε``.  ``max_atoms`` (default ``min(64, q)``) caps the
-            atom count, since the bound is often unreachable; ``precompute`` as for ``"omp"``.
+            one atom is selected unless ``‖f‖² ≤ ε``.  ``max_atoms`` (default ``min(64, q)``)
+            caps the atom count, since the bound is often unreachable (``info.converged`` says
+            which functions met it); ``precompute`` as for ``"omp"``.
 
             ``"lasso"`` — ``lam`` (default 0.01): ``λ = lam · ‖Bᵀf‖∞`` per function, so the
             same ``lam`` means the same relative sparsity pressure whatever the scale of ``f``
@@ -425,19 +427,36 @@ def _lstsq(B, F, C, rcond):
     return jnp.where(jnp.any(B != 0, axis=0), alpha, 0.0)
 
 
+#: Functions are coded in chunks whose OMP buffers (``chunk × steps × q`` Gram rows) hold about
+#: this many numbers, so that they stay in cache and memory stays bounded for any batch size.
+_OMP_CHUNK_ELEMS = 2**22
+
+
 def _omp(B, C, fnorm2, eps, n_steps: int, gram: bool):
-    """Batch-OMP on the normalised atoms; returns ``(alpha, n_selected, exhausted)``."""
+    """Batch-OMP on the normalised atoms; returns ``(alpha, n_selected, exhausted)``.
+
+    B ``(n, q)``, C = Bᵀf ``(m, q)``, fnorm2 ``(m,)``, eps ``(m,)`` bound on the squared residual
+    (``-inf``: none).  Per function and step ``t`` (``I`` the selected atoms, ``D = B/‖b‖``)::
+
+        k   = argmax |c| over atoms not selected and not empty      c = Dᵀr, the correlations
+        w   = L⁻¹ G_{I,k};  d² = 1 − ‖w‖²                            L Lᵀ = G_II (Cholesky)
+        L⁻¹ ← [[L⁻¹, 0], [−wᵀL⁻¹/d, 1/d]];  y ← [y, (c0_k − wᵀy)/d]   y = L⁻¹ (Dᵀf)_I
+        β   = L⁻ᵀ y;  c = c0 − G_{:,I} β;  ‖r‖² = ‖f‖² − ‖y‖²
+
+    A function stops (and stays stopped) when no atom is left, ``c_k² ≤ eps·‖f‖²``,
+    ``‖r‖² ≤ ε``, or ``d² ≤ 100·eps`` (atom ``k`` dependent on ``I``); so a function still
+    running at step ``t`` has exactly ``t`` atoms, and every update writes slot ``t``.
+    """
     dtype = B.dtype
     m, q = C.shape
     T = n_steps
     norms = jnp.sqrt(jnp.sum(B * B, axis=0))
     valid = norms > 0
     inv_norm = jnp.where(valid, 1.0 / jnp.where(valid, norms, 1.0), 0.0)
-    c0 = C * inv_norm  # Dᵀf
     if gram:
         Gn = (B.T @ B) * inv_norm[:, None] * inv_norm[None, :]
 
-        def gram_rows(k):  # (m,) -> (m, q) rows of DᵀD
+        def gram_rows(k):  # (b,) -> (b, q) rows of DᵀD
             return Gn[k]
     else:
         Dn = B * inv_norm
@@ -447,64 +466,76 @@ def _omp(B, C, fnorm2, eps, n_steps: int, gram: bool):
 
     tiny = jnp.finfo(dtype).eps
     tol_dep = 100 * jnp.finfo(dtype).eps
-    rows = jnp.arange(m)
     slots = jnp.arange(T)
 
-    def cond(state):
-        t, *_, done, _res2 = state
-        return (t < T) & ~jnp.all(done)
+    def run(args):  # one chunk of b functions
+        c0, fnorm2, eps = args
+        b = c0.shape[0]
+        rows = jnp.arange(b)
 
-    def body(state):
-        t, idx, Linv, y, gsel, c, avail, n_sel, exhausted, done, res2 = state
-        score = jnp.where(avail, jnp.abs(c), -1.0)
-        k = jnp.argmax(score, axis=1).astype(jnp.int32)
-        ck = c[rows, k]
-        none_left = score[rows, k] < 0
-        fitted = ck * ck <= tiny * fnorm2  # residual orthogonal to all atoms (or f = 0)
-        stop = done | none_left | fitted | (res2 <= eps)
-        g = gram_rows(k)  # (m, q)
-        used = slots[None, :] < n_sel[:, None]
-        gI = jnp.where(used, jnp.take_along_axis(g, idx, axis=1), 0.0)
-        w = jnp.einsum("mij,mj->mi", Linv, gI)  # L⁻¹ G_{I,k}
-        d2 = g[rows, k] - jnp.sum(w * w, axis=1)  # squared distance of atom k to span(D_I)
-        act = ~stop & (d2 > tol_dep)
-        d = jnp.sqrt(jnp.where(act, d2, 1.0))
-        # New row of L⁻¹ for L = [[L_I, 0], [wᵀ, d]]:  [−wᵀ L_I⁻¹ / d, 1/d].
-        new_row = -jnp.einsum("mi,mij->mj", w, Linv) / d[:, None]
-        new_row = jnp.where(slots[None, :] == n_sel[:, None], 1.0 / d[:, None], new_row)
-        slot = jnp.minimum(n_sel, T - 1)
-        Linv = Linv.at[rows, slot].set(jnp.where(act[:, None], new_row, Linv[rows, slot]))
-        y_new = (c0[rows, k] - jnp.sum(w * y, axis=1)) / d  # y = L⁻¹ (Dᵀf)_I
-        y = y.at[rows, slot].set(jnp.where(act, y_new, y[rows, slot]))
-        gsel = gsel.at[rows, slot].set(jnp.where(act[:, None], g, gsel[rows, slot]))
-        idx = idx.at[rows, slot].set(jnp.where(act, k, idx[rows, slot]))
-        avail = avail.at[rows, k].set(avail[rows, k] & ~act)
-        beta = jnp.einsum("mji,mj->mi", Linv, y)  # β = L⁻ᵀ y = G_II⁻¹ (Dᵀf)_I
-        c = c0 - jnp.einsum("mi,miq->mq", beta, gsel)  # Dᵀ r
-        res2 = jnp.where(act, res2 - y_new * y_new, res2)  # ‖r‖² = ‖f‖² − ‖y‖²
-        exhausted = exhausted | (~done & (fitted | none_left))
-        return (t + 1, idx, Linv, y, gsel, c, avail, n_sel + act, exhausted, done | ~act, res2)
+        def cond(state):
+            t, *_, done, _res2 = state
+            return (t < T) & ~jnp.all(done)
 
-    state = (
-        jnp.asarray(0),
-        jnp.zeros((m, T), jnp.int32),
-        jnp.broadcast_to(jnp.eye(T, dtype=dtype), (m, T, T)),
-        jnp.zeros((m, T), dtype),
-        jnp.zeros((m, T, q), dtype),
-        c0,
-        jnp.broadcast_to(valid, (m, q)),
-        jnp.zeros(m, jnp.int32),
-        jnp.zeros(m, bool),
-        jnp.zeros(m, bool),
-        fnorm2,
-    )
-    _, idx, Linv, y, _, _, _, n_sel, exhausted, done, _ = jax.lax.while_loop(cond, body, state)
-    # A lane that ran all T steps without stopping may still have nothing left to fit.
-    beta = jnp.einsum("mji,mj->mi", Linv, y)
-    used = slots[None, :] < n_sel[:, None]
-    coef = jnp.where(used, beta * inv_norm[idx], 0.0)
-    alpha = jnp.zeros((m, q), dtype).at[rows[:, None], idx].add(coef)
-    return alpha, n_sel, exhausted
+        def body(state):
+            t, idx, Linv, y, gsel, c, avail, n_sel, exhausted, done, res2 = state
+            score = jnp.where(avail, jnp.abs(c), -1.0)
+            k = jnp.argmax(score, axis=1).astype(jnp.int32)
+            ck = c[rows, k]
+            none_left = score[rows, k] < 0
+            fitted = ck * ck <= tiny * fnorm2  # residual orthogonal to all atoms (or f = 0)
+            stop = done | none_left | fitted | (res2 <= eps)
+            g = gram_rows(k)  # (b, q)
+            gI = jnp.where(slots < t, jnp.take_along_axis(g, idx, axis=1), 0.0)
+            w = jnp.einsum("bij,bj->bi", Linv, gI)  # L⁻¹ G_{I,k}
+            d2 = g[rows, k] - jnp.sum(w * w, axis=1)  # squared distance of atom k to span(D_I)
+            act = ~stop & (d2 > tol_dep)
+            d = jnp.sqrt(jnp.where(act, d2, 1.0))
+            new_row = -jnp.einsum("bi,bij->bj", w, Linv) / d[:, None]
+            new_row = jnp.where(slots == t, 1.0 / d[:, None], new_row)
+            y_new = (c0[rows, k] - jnp.sum(w * y, axis=1)) / d
+
+            def put(buf, new):  # write slot t of the running functions (in place)
+                old = jax.lax.dynamic_index_in_dim(buf, t, axis=1, keepdims=False)
+                sel = jnp.where(act.reshape((b,) + (1,) * (new.ndim - 1)), new, old)
+                return jax.lax.dynamic_update_index_in_dim(buf, sel, t, axis=1)
+
+            Linv, y, gsel, idx = put(Linv, new_row), put(y, y_new), put(gsel, g), put(idx, k)
+            avail = avail.at[rows, k].set(avail[rows, k] & ~act)
+            beta = jnp.einsum("bji,bj->bi", Linv, y)  # β = L⁻ᵀ y = G_II⁻¹ (Dᵀf)_I
+            c = c0 - jnp.einsum("bi,biq->bq", beta, gsel)  # Dᵀ r
+            res2 = jnp.where(act, res2 - y_new * y_new, res2)
+            exhausted = exhausted | (~done & (fitted | none_left))
+            return (t + 1, idx, Linv, y, gsel, c, avail, n_sel + act, exhausted, done | ~act,
+                    res2)
+
+        state = (
+            jnp.asarray(0),
+            jnp.zeros((b, T), jnp.int32),
+            jnp.broadcast_to(jnp.eye(T, dtype=dtype), (b, T, T)),
+            jnp.zeros((b, T), dtype),
+            jnp.zeros((b, T, q), dtype),
+            c0,
+            jnp.broadcast_to(valid, (b, q)),
+            jnp.zeros(b, jnp.int32),
+            jnp.zeros(b, bool),
+            jnp.zeros(b, bool),
+            fnorm2,
+        )
+        _, idx, Linv, y, _, _, _, n_sel, exhausted, _, _ = jax.lax.while_loop(cond, body, state)
+        beta = jnp.einsum("bji,bj->bi", Linv, y)
+        coef = jnp.where(slots < n_sel[:, None], beta * inv_norm[idx], 0.0)
+        alpha = jnp.zeros((b, q), dtype).at[rows[:, None], idx].add(coef)
+        return alpha, n_sel, exhausted
+
+    chunk = max(1, min(m, _OMP_CHUNK_ELEMS // (T * q)))
+    args = (C * inv_norm, fnorm2, eps)  # c0 = Dᵀf
+    if chunk == m:
+        return run(args)
+    pad = -m % chunk  # zero functions: they stop at once
+    args = jax.tree.map(lambda x: jnp.pad(x, [(0, pad)] + [(0, 0)] * (x.ndim - 1)), args)
+    out = jax.lax.map(run, jax.tree.map(lambda x: x.reshape((-1, chunk) + x.shape[1:]), args))
+    return jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:])[:m], out)
 
 
 def _spectral_bound(G, iters: int = 30):

@@ -78,7 +78,7 @@ ORIENTATIONS = ("preserving", "reversing")
 
 
 class FmapWeights(NamedTuple):
-    """Relative weights of the energy terms (pyFM's ``w_descr``, ``w_lap``, ``w_dcomm``, ``w_orient``).
+    """Relative weights of the energy terms (pyFM's ``w_descr, w_lap, w_dcomm, w_orient``).
 
     Only their ratios matter: they are divided by their sum and, with ``normalize_weights``, by
     each term's canonical scale (module doc).  ``orient > 0`` needs the meshes.

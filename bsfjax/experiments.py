@@ -3,15 +3,15 @@
 Each experiment returns a list of flat ``dict`` rows (one per function × method × setting, a
 "tidy" table that :func:`write_csv` writes and :func:`summarize` aggregates):
 
-=========  ===========================================================================
-``table1`` approximation error (Eq. 14) vs k ∈ {10, 30, 50, 70, 90}       :func:`approximation_experiment`
-``table2`` transfer error (Eq. 15) with ground-truth maps, same k          :func:`transfer_experiment`
-``fig7``   transfer error as k_N grows, k_M ∈ {10, 30, 50}                 :func:`kn_experiment`
-``table3`` frame build time: geod, heat, ours                             :func:`frame_time_experiment`
-``table4`` time to transfer one function with estimated maps              :func:`transfer_time_experiment`
-``table5`` TOSCA classes, estimated 10×10 and 30×30 maps, two parameter sets  :func:`tosca_experiment`
-``fig10``  dependence on n_BSF share, FPS distance, γ, ε and S             :func:`parameter_experiment`
-=========  ===========================================================================
+* ``table1`` — approximation error (Eq. 14) vs k ∈ {10, 30, 50, 70, 90}:
+  :func:`approximation_experiment`;
+* ``table2`` — transfer error (Eq. 15) with ground-truth maps, same k: :func:`transfer_experiment`;
+* ``fig7`` — transfer error as k_N grows, k_M ∈ {10, 30, 50}: :func:`kn_experiment`;
+* ``table3`` — frame build time (geod, heat, ours): :func:`frame_time_experiment`;
+* ``table4`` — time to transfer one function with estimated maps: :func:`transfer_time_experiment`;
+* ``table5`` — TOSCA classes, estimated 10×10 and 30×30 maps, two parameter sets:
+  :func:`tosca_experiment`;
+* ``fig10`` — dependence on the n_BSF share, FPS distance, γ, ε and S: :func:`parameter_experiment`.
 
 Errors are the square-root form ``‖f − f̃‖_A / ‖f‖_A`` (:func:`bsfjax.relative_error`).
 Test functions are random connected indicators covering 5–25 % of the area
@@ -650,17 +650,22 @@ def _line_plot(panels, path, ylabel="mean relative error"):
     fig = Figure(figsize=(4.2 * len(panels), 3.6), dpi=110)
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    bases = list(dict.fromkeys(lb.removesuffix(" (approx)") for _, _, ls, _ in panels
+                               for lb in ls))
+    colour = {b: f"C{i % 10}" for i, b in enumerate(bases)}  # one colour per method
     for ax, (title, xlabel, lines, categorical) in zip(axes, panels):
         for label, (xs, ys) in lines.items():
             x = np.arange(len(xs)) if categorical else np.asarray(xs, float)
-            ax.plot(x, ys, marker="o", ms=3, label=label)
+            approx = label.endswith(" (approx)")
+            ax.plot(x, ys, marker="o", ms=3, label=label, ls="--" if approx else "-",
+                    color=colour[label.removesuffix(" (approx)")])
             if categorical:
                 ax.set_xticks(x, [str(v) for v in xs])
         ax.set_title(title)
         ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3)
+        ax.legend(fontsize=6)
     axes[0].set_ylabel(ylabel)
-    axes[-1].legend(fontsize=7)
     fig.tight_layout()
     path = Path(path)
     with atomic_path(path) as tmp:
@@ -716,6 +721,8 @@ def reproduce(name: str, data, out, *, pairs: int = 2, functions: int = 100, see
                         "γ = 0.75, S = 10, ε = ‖f‖/10, area-weighted coding",
             "jax": jax.__version__, "backend": jax.default_backend(),
             "machine": platform.machine()}
+    if name in ("table3", "table4"):
+        del meta["functions per shape"]  # timings use no (table 3) or one (table 4) function
     files = []
     stem = out / name
     if name == "table1":
@@ -763,7 +770,8 @@ def reproduce(name: str, data, out, *, pairs: int = 2, functions: int = 100, see
             lines.update({f"{m} (approx)": _curve(asumm, {"parameter": param, "method": m},
                                                   "value") for m in ms})
             panels.append((param, param, lines, True))
-        md = "\n\n".join(parts) + "\n\n## spread (max − min of the mean transfer error over " \
+        md = "Dashed lines in the figure: approximation error; solid: transfer error.\n\n" \
+            + "\n\n".join(parts) + "\n\n## spread (max − min of the mean transfer error over " \
             "the values)\n\n" + _spread_markdown(rows)
         files.append(_line_plot(panels, stem.with_suffix(".png")))
     seconds = time.perf_counter() - t0

@@ -183,6 +183,27 @@ def test_ours_omp_matches_sklearn(body):
         np.testing.assert_allclose(r.approximation, want, atol=1e-8)
 
 
+def test_ours_lasso_matches_sklearn(body):
+    """½‖f − Bα‖²_A + λ‖α‖₁ with λ = lam·‖Bᵀ A f‖∞ (coding's relative λ) against sklearn."""
+    from sklearn.linear_model import Lasso
+
+    ex, s, t, ctr, F, C = body
+    k, lam = 10, 0.05
+    with jax.enable_x64(True):
+        B = np.asarray(bsfjax.build_frame(s.truncate(k), ctr).atoms)
+        w = np.sqrt(s.mass)
+        X = B * w[:, None]
+        r = run_baseline("lasso", PairInput(s, centers=ctr), F[:3], k=k, transfer=False,
+                         params=Params(lam=lam, lasso_maxiter=20000))
+        for i in range(3):
+            y = F[i] * w
+            lam_abs = lam * np.abs(X.T @ y).max()
+            sk = Lasso(alpha=lam_abs / len(y), fit_intercept=False, tol=1e-12, max_iter=100000)
+            want = B @ sk.fit(X, y).coef_
+            got = np.asarray(r.approximation[i])
+            assert np.sqrt(s.mass @ (got - want) ** 2) < 2e-3 * np.sqrt(s.mass @ F[i] ** 2)
+
+
 def test_omp_error_bound_is_eps_fraction_of_the_area_norm(body):
     ex, s, t, ctr, F, C = body
     with jax.enable_x64(True):
@@ -213,6 +234,21 @@ def test_vmap_over_stacked_pairs_equals_single_runs(body):
             r = run_baseline(method, p, FF[i], k=k)
             np.testing.assert_allclose(rs.approximation[i], r.approximation, atol=2e-5)
             np.testing.assert_allclose(rs.transferred[i], r.transferred, atol=2e-5)
+
+
+def test_k_targets_reuse_one_code(body):
+    ex, s, t, ctr, F, C = body
+    pair = PairInput(s, t, C[:20, :10], centers=ctr)
+    for method in ("std", "omp"):
+        res = run_baseline(method, pair, F, k=10, k_targets=(5, 12, 20))
+        assert isinstance(res.transferred, tuple) and len(res.transferred) == 3
+        for kn, tr in zip((5, 12, 20), res.transferred):
+            one = run_baseline(method, PairInput(s, t, C[:kn, :10], centers=ctr), F, k=10)
+            np.testing.assert_allclose(tr, one.transferred, atol=2e-5)
+    with pytest.raises(BSFError, match="k_targets must be non-empty ints in"):
+        run_baseline("std", pair, F, k=10, k_targets=(30,))
+    with pytest.raises(BSFError, match="k_targets needs"):
+        run_baseline("std", pair, F, k=10, k_targets=(5,), transfer=False)
 
 
 def test_every_method_runs_and_errors_are_sane(body):

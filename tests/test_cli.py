@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 import bsfjax
 from bsfjax.cli import main
@@ -39,3 +40,71 @@ def test_bad_input_is_one_line_without_traceback(tmp_path):
     assert "Traceback" not in r.stderr
     assert r.stderr.strip().count("\n") == 0 and "no such file" in r.stderr
     assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def cli_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    pair = bsfjax.example_pair(levels=2)
+    bsfjax.save_mesh(d / "src.ply", pair.source)
+    bsfjax.save_mesh(d / "tgt.off", pair.target)
+    np.savetxt(d / "labels.txt", pair.labels, fmt="%d")
+    np.save(d / "identity.npy", np.asarray(pair.p2p))
+    np.savetxt(d / "short.txt", pair.labels[:-3], fmt="%d")
+    return d, pair
+
+
+def test_transfer_command_labels_with_point_map(cli_files):
+    d, pair = cli_files
+    out, ply = d / "out.npy", d / "coloured.ply"
+    rc = main(["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--labels", str(d / "labels.txt"),
+               "--out", str(out), "--map", "p2p", str(d / "identity.npy"), "-k", "20",
+               "--mesh-out", str(ply)])
+    assert rc == 0
+    got = np.load(out)
+    assert got.shape == (pair.target.n_vertices,)
+    assert np.mean(got == pair.labels) > 0.85
+    import meshio
+
+    m = meshio.read(ply)
+    assert m.points.shape[0] == pair.target.n_vertices
+    assert {"red", "green", "blue", "label"} <= set(m.point_data)
+    np.testing.assert_array_equal(m.point_data["label"], got)
+
+
+def test_transfer_command_function_with_estimated_map(cli_files):
+    d, pair = cli_files
+    f = (pair.labels == 1).astype(float)  # the head
+    np.savetxt(d / "head.txt", f)
+    out = d / "head_out.txt"
+    rc = main(["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--function", str(d / "head.txt"),
+               "--out", str(out), "-k", "20", "--landmarks", "{0}:{0}".format(
+                   ",".join(str(i) for i in __import__("bsfjax.demo").demo.example_landmarks(pair)))])
+    assert rc == 0
+    got = np.loadtxt(out)
+    err = bsfjax.relative_error(f, got, bsfjax.spectrum(pair.target, 5).mass)
+    assert float(err) < 0.5
+
+
+@pytest.mark.parametrize("extra,match", [
+    (["--labels", "{d}/missing.txt"], "no such file"),
+    (["--labels", "{d}/short.txt"], "source mesh has 2018 vertices"),
+    (["--labels", "{d}/labels.txt", "--method", "magic"], "--method must be one of"),
+    (["--labels", "{d}/labels.txt", "--landmarks", "1,2,3:4,5"], "same, non-zero length"),
+    (["--labels", "{d}/labels.txt", "--map", "p2p"], "--map must be"),
+    (["--labels", "{d}/labels.txt", "--map", "fmap", "{d}/labels.txt"], "square"),
+])
+def test_transfer_command_bad_input(cli_files, extra, match):
+    d, _ = cli_files
+    out = d / "never.txt"
+    args = ["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--out", str(out)]
+    args += [a.format(d=d) for a in extra]
+    r = run(*args)
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr
+    err_lines = [ln for ln in r.stderr.splitlines() if "error:" in ln]
+    assert len(err_lines) == 1 and match in err_lines[0]
+    assert not out.exists()
+    r = run("transfer", str(d / "nope.ply"), str(d / "tgt.off"), "--labels", str(d / "labels.txt"),
+            "--out", str(out))
+    assert r.returncode == 2 and "nope.ply: no such file" in r.stderr and not out.exists()

@@ -77,7 +77,7 @@ def sk_omp(B, F, S=None, tol=None, precompute=False):
             if tol is None:
                 beta = orthogonal_mp_gram(G, Xy, n_nonzero_coefs=S)
             else:
-                beta = np.stack([orthogonal_mp_gram(G, Xy[:, i], tol=float(tol[i]),
+                beta = np.stack([orthogonal_mp_gram(G, Xy[:, i:i + 1], tol=float(tol[i]),
                                                     norms_squared=[F[i] @ F[i]])
                                  for i in range(F.shape[0])], axis=1)
         elif tol is None:
@@ -180,7 +180,7 @@ def test_lstsq_rcond_cuts_small_singular_values():
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("S", [1, 5, 12])
+@pytest.mark.parametrize("S", [1, 12])
 @pytest.mark.parametrize("precompute", [True, False])
 def test_omp_matches_sklearn_random(S, precompute):
     """Same support and coefficients (1e-6, float64) as orthogonal_mp.
@@ -462,6 +462,18 @@ def test_vmap_jit_and_batch_equal_single_calls(method):
         nested = encode(B, F.reshape(5, 1, -1), method, **opts)
     for other in (batch, vm, jt, nested.reshape(5, -1)):
         np.testing.assert_allclose(other, loop, rtol=0, atol=1e-10 * np.abs(loop).max())
+
+
+@pytest.mark.parametrize("method", ["lstsq", "omp"])
+def test_vmap_over_frames(method):
+    """A stack of frames (e.g. one per shape) with one function each, under one vmap."""
+    Bs = np.stack([random_frame(s) for s in (26, 27, 28)])
+    F = random_functions(29, 3, Bs.shape[1])
+    frames = jax.tree.map(lambda *x: jnp.stack(x), *[as_frame(B) for B in Bs])
+    with jax.enable_x64(True):
+        vm = jax.vmap(lambda fr, f: encode(fr, f, method, weights="area"))(frames, F)
+        loop = np.stack([np.asarray(encode(B, f, method)) for B, f in zip(Bs, F)])
+    np.testing.assert_allclose(vm, loop, rtol=0, atol=1e-10 * np.abs(loop).max())
 
 
 def test_batch_shapes_info_and_decode():

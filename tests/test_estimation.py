@@ -36,7 +36,8 @@ def small():
     """Source shape, a vertex-permuted copy (GT known) and a deformed shape, with spectra."""
     src = bumpy_sphere()
     perm = np.random.default_rng(1).permutation(src.n_vertices)
-    copy = bsfjax.Mesh(src.vertices[perm], np.argsort(perm)[src.faces])  # copy vertex i = src perm[i]
+    # copy vertex i is source vertex perm[i]
+    copy = bsfjax.Mesh(src.vertices[perm], np.argsort(perm)[src.faces])
     other = bumpy_sphere(scale=(1.1, 0.75, 1.25))
     spectra = [bsfjax.spectrum(m, 30) for m in (src, copy, other)]
     return (src, copy, other), spectra, perm
@@ -62,7 +63,7 @@ def ref_orientation_op(mesh, f):
 
 def ref_estimate(sm, sn, dm, dn, k, w, lap="resolvent", gamma=0.5, normalize_weights=True,
                  meshes=None, sign=1.0):
-    """Dense least squares: the stacked residual of every term built with np.kron, solved by lstsq."""
+    """Dense least squares: every term's stacked residual built with np.kron, solved by lstsq."""
     pm, pn = sm.evecs[:, :k], sn.evecs[:, :k]
     am, an = sm.mass, sn.mass
     dm = dm / np.sqrt(am @ dm**2)

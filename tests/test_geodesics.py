@@ -22,7 +22,8 @@ def flat_grid(n=21, size=2.0):
     xx, yy = np.meshgrid(x, x, indexing="ij")
     v = np.stack([xx.ravel(), yy.ravel(), np.zeros(n * n)], axis=1)
     idx = np.arange(n * n).reshape(n, n)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    a, b = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
+    c, d = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
     f = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     return bsfjax.Mesh(v, f)
 
