@@ -115,14 +115,25 @@ def sk_omp_error(B, F, eps):
     return back(beta, norms, ok, B.shape[1]).T
 
 
+#: Facts about the peers' runs (e.g. how many Lasso fits did not converge), saved in the JSON.
+PEER_NOTES: dict[str, object] = {}
+
+
 def sk_lasso(B, F, lam):
+    from sklearn.exceptions import ConvergenceWarning
     from sklearn.linear_model import Lasso
 
     n = B.shape[0]
     out = []
+    not_converged = 0
     for f in F:
         l_abs = lam * np.abs(B.T @ f).max()
-        out.append(Lasso(alpha=l_abs / n, fit_intercept=False).fit(B, f).coef_)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            out.append(Lasso(alpha=l_abs / n, fit_intercept=False).fit(B, f).coef_)
+        not_converged += any(issubclass(w.category, ConvergenceWarning) for w in caught)
+    PEER_NOTES["sklearn Lasso fits not converged (default tol=1e-4, max_iter=1000)"] = (
+        not_converged)
     return np.stack(out)
 
 
@@ -254,7 +265,7 @@ def main(argv=None):
         "omp_error_eps": f"({args.eps_fraction}*||f||)^2, max_atoms={args.max_atoms}",
         "omp_error_default": default_eps,
         "jax": jax.__version__, "platform": platform.platform(),
-        "cpu_count": os.cpu_count(), "rows": rows,
+        "cpu_count": os.cpu_count(), "peer_notes": PEER_NOTES, "rows": rows,
     }
     with atomic_path(args.out) as tmp:
         Path(tmp).write_text(json.dumps(result, indent=2))

@@ -46,8 +46,8 @@ stacked least-squares residual.  ``H`` is assembled exactly from Kronecker struc
 
 each ``Σ_q A_N^q ⊗ A_M^q`` being one GEMM ``(k_N², p) @ (p, k_M²)``.  The linear residual
 ``r(c) = H c − g`` is solved by ``optimistix.least_squares`` with Gauss–Newton and a lineax
-Cholesky solve (H is symmetric positive definite): the first step is the exact solution, the
-next an iterative-refinement step that certifies convergence.  Everything runs in one jitted
+Cholesky solve (H is symmetric positive definite, Jacobi-scaled): the first step is the exact
+solution, the next ones are iterative-refinement steps that certify convergence.  Everything runs in one jitted
 call; a stack of pairs (stacked spectra and descriptors of equal shapes) is ``vmap``-ed.
 
 Cost at k = 30, p = 200, n ≈ 7K: the operators D (one GEMM over the k(k+1)/2 eigenvector
@@ -326,16 +326,20 @@ def _solve(pb: _Problem, *, rtol, atol, max_steps):
     # Only C[:, 1:] is free; the fixed column contributes −H[free, (0, 0)] C[0, 0] to the rhs.
     H_ff = H[:, 1:, :, 1:].reshape(kn * (km - 1), kn * (km - 1))
     rhs = (g[:, 1:] - H[:, 1:, 0, 0] * pb.c00).reshape(-1)
-    # Unit mean diagonal: tolerances mean the same whatever the descriptors' scale.
-    scale = jnp.trace(H_ff) / H_ff.shape[0]
-    scale = jnp.where(scale > 0, scale, 1.0)
-    H_ff, rhs = H_ff / scale, rhs / scale
+    # Jacobi scaling D^{-1/2} H D^{-1/2} (unit diagonal): cuts the condition number several-fold
+    # (measured 5500 → 1800 on FAUST), so float32 refinement converges to the tolerances in the
+    # minimal 3 Gauss–Newton steps, and the tolerances mean the same whatever the weights.
+    dg = jnp.sqrt(jnp.diagonal(H_ff))
+    dg = jnp.where(dg > 0, dg, 1.0)
+    H_ff = H_ff / dg[:, None] / dg[None, :]
     H_ff = 0.5 * (H_ff + H_ff.T)  # exact symmetry for the Cholesky solve
     solver = optx.GaussNewton(rtol=rtol, atol=atol, linear_solver=lx.Cholesky())
-    sol = optx.least_squares(_residual, solver, jnp.zeros_like(rhs), args=(H_ff, rhs),
+    # throw=False: if float32 round-off keeps the refinement from certifying the tolerances
+    # within max_steps, the last iterate (already the solution to working precision) is kept.
+    sol = optx.least_squares(_residual, solver, jnp.zeros_like(rhs), args=(H_ff, rhs / dg),
                              max_steps=max_steps, throw=False,
                              tags=frozenset({lx.symmetric_tag, lx.positive_semidefinite_tag}))
-    free = sol.value.reshape(kn, km - 1)
+    free = (sol.value / dg).reshape(kn, km - 1)
     first = jnp.zeros((kn, 1), free.dtype).at[0, 0].set(pb.c00)
     return jnp.concatenate([first, free], axis=1)
 
@@ -507,7 +511,8 @@ def estimate_fmap(source_spectrum: Spectrum, target_spectrum: Spectrum, source_d
         orientation: ``"preserving"`` or ``"reversing"`` (sign σ of the orientation term).
         normalize_descriptors: L2-normalize descriptor columns (area-weighted) first.
         normalize_weights: divide each weight by its term's canonical scale (module doc).
-        max_steps: Gauss–Newton step limit (2–3 are used; the problem is linear).
+        max_steps: Gauss–Newton step limit (3 are normally used: the problem is linear, the
+            first step solves it, the next ones refine and certify convergence).
 
     Returns:
         ``(k_N, k_M)`` map (or ``(B, k_N, k_M)``); :func:`bsfjax.fmap_to_p2p` converts it.

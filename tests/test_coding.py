@@ -267,6 +267,21 @@ def test_omp_gram_and_column_paths_agree(faust):
     np.testing.assert_allclose(a, b, atol=1e-10)
 
 
+@pytest.mark.parametrize("method", ["omp", "omp_error"])
+def test_omp_chunked_batches_equal_one_chunk(method, monkeypatch):
+    """Large batches run in chunks (lax.map, last chunk padded): same result as one chunk."""
+    B = random_frame(30, n=50, q=40)
+    F = random_functions(31, 8, 50)
+    opts = {"sparsity": 6} if method == "omp" else {"eps": 0.2 * np.sum(F * F, 1), "max_atoms": 6}
+    with jax.enable_x64(True):
+        whole, info_w = encode(B, F, method, return_info=True, **opts)
+        monkeypatch.setattr(bsfjax.coding, "_OMP_CHUNK_ELEMS", 3 * 6 * 40)  # chunks of 3
+        chunked, info_c = encode(B, F, method, return_info=True, **opts)
+    np.testing.assert_allclose(chunked, whole, rtol=0, atol=1e-12)
+    for a, b in zip(info_c, info_w):
+        np.testing.assert_allclose(a, b, rtol=1e-12)
+
+
 def test_omp_duplicates_empty_atoms_and_exhaustion():
     """S = q on a frame with an empty and a duplicated atom: never the empty atom, never both
     copies, no NaN; OMP stops once nothing is left to fit, at the least-squares residual."""
