@@ -310,7 +310,7 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
     selected, no atom is selected twice, and a function stops early when its best correlation
     satisfies ``c² ≤ eps·‖f‖²`` (nothing left to fit at this precision) or when the best atom
     is linearly dependent on the selected ones.  Large batches are processed in chunks of
-    about 4M buffered numbers (``chunk · steps · q``), which bounds memory and keeps the
+    about 1M buffered numbers (``chunk · steps · q``), which bounds memory and keeps the
     per-step work in cache.
     """
     atoms, mass = _unpack_frame(frame)
@@ -436,8 +436,10 @@ def _lstsq(B, F, C, rcond):
 
 
 #: Functions are coded in chunks whose OMP buffers (``chunk × steps × q`` Gram rows) hold about
-#: this many numbers, so that they stay in cache and memory stays bounded for any batch size.
-_OMP_CHUNK_ELEMS = 2**22
+#: this many numbers, so that they stay in cache and memory stays bounded for any batch size
+#: (and a chunk whose functions all stopped ends its loop early).  Measured on FAUST, q = 1032,
+#: 256 steps, 100 functions: 2²⁰ is 2–3× faster than 2²² in float32 and float64.
+_OMP_CHUNK_ELEMS = 2**20
 
 
 def _omp(B, C, fnorm2, eps, n_steps: int, gram: bool, chunk: int):

@@ -32,23 +32,16 @@ import scipy.sparse.csgraph
 
 from .errors import BSFError
 from .laplacian import laplacian
-from .mesh import Mesh
+from .mesh import Mesh, graph_from_edges, mesh_edges
 
 __all__ = ["random_indicators", "labels_to_indicators", "indicators_to_labels"]
 
 
-def _edge_graph(mesh: Mesh, rng: np.random.Generator, irregularity: float) -> sp.csr_matrix:
-    f = mesh.faces
-    e = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1),
-                  axis=0)
+def _random_edge_graph(mesh: Mesh, rng: np.random.Generator, irregularity: float) -> sp.csr_matrix:
+    """Edge graph with lengths scaled by log-normal noise, so regions grow irregularly."""
+    e, _ = mesh_edges(mesh.faces)
     w = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
-    w = w * np.exp(irregularity * rng.standard_normal(len(e)))
-    # csgraph reads an explicit 0 as "no edge": keep duplicate vertices connected
-    w = np.maximum(w, np.finfo(np.float64).tiny)
-    n = mesh.n_vertices
-    return sp.csr_matrix((np.concatenate([w, w]), (np.concatenate([e[:, 0], e[:, 1]]),
-                                                   np.concatenate([e[:, 1], e[:, 0]]))),
-                         shape=(n, n))
+    return graph_from_edges(mesh.n_vertices, e, w * np.exp(irregularity * rng.standard_normal(len(e))))
 
 
 def _check_fraction(area_fraction) -> tuple[float, float]:
@@ -104,7 +97,7 @@ def random_indicators(mesh: Mesh, count: int, seed: int = 0, area_fraction=(0.05
         raise BSFError(f"mass must be ({n},) finite, >= 0 and not all zero, got shape "
                        f"{mass.shape}")
     rng = np.random.default_rng(int(seed))
-    graph = _edge_graph(mesh, rng, float(irregularity))
+    graph = _random_edge_graph(mesh, rng, float(irregularity))
     seeds = rng.choice(n, size=count, replace=count > n)
     target = rng.uniform(lo, hi, size=count) * mass.sum()
     dist = scipy.sparse.csgraph.dijkstra(graph, directed=False, indices=seeds)  # (count, n)

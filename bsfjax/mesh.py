@@ -12,11 +12,12 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 
 from ._files import atomic_path
 from .errors import MeshError
 
-__all__ = ["Mesh", "MeshError", "load_mesh", "save_mesh"]
+__all__ = ["Mesh", "MeshError", "load_mesh", "save_mesh", "mesh_edges", "edge_graph", "graph_from_edges"]
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -110,6 +111,34 @@ class Mesh:
     def __repr__(self) -> str:
         name = f", name={self.name!r}" if self.name else ""
         return f"Mesh(n_vertices={self.n_vertices}, n_faces={self.n_faces}{name})"
+
+
+def mesh_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unique undirected edges ``(e, 2)`` (sorted pairs, lexicographic order) and, per face,
+    the index of its edges ``(m, 3)`` in the order (v0v1, v1v2, v2v0)."""
+    faces = np.asarray(faces)
+    half = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    edges, inv = np.unique(np.sort(half, axis=1), axis=0, return_inverse=True)
+    return edges, inv.reshape(3, -1).T
+
+
+def graph_from_edges(n: int, edges: np.ndarray, weights: np.ndarray) -> sp.csr_matrix:
+    """Symmetric ``(n, n)`` sparse graph with ``weights`` on ``edges`` (both directions).
+
+    scipy's csgraph reads an explicit 0 as "no edge", so zero weights (duplicate vertices) are
+    raised to the smallest positive float: their endpoints stay connected at distance ~0.
+    """
+    w = np.maximum(np.asarray(weights, dtype=np.float64), np.finfo(np.float64).tiny)
+    rows = np.concatenate([edges[:, 0], edges[:, 1]])
+    cols = np.concatenate([edges[:, 1], edges[:, 0]])
+    return sp.csr_matrix((np.concatenate([w, w]), (rows, cols)), shape=(n, n))
+
+
+def edge_graph(mesh: "Mesh") -> sp.csr_matrix:
+    """The mesh's edge graph weighted by edge length (for Dijkstra), ``(n, n)`` CSR."""
+    e, _ = mesh_edges(mesh.faces)
+    lengths = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
+    return graph_from_edges(mesh.n_vertices, e, lengths)
 
 
 def _triangulate(cells) -> np.ndarray:

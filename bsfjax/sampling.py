@@ -31,7 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph
 
 from .errors import BSFError
-from .mesh import Mesh
+from .mesh import Mesh, edge_graph
 from .spectrum import Spectrum
 
 __all__ = ["farthest_point_sampling", "edge_graph", "n_samples"]
@@ -61,22 +61,6 @@ def n_samples(n, n_points: int) -> int:
                            f"(0, 1], got {n!r}")
         return max(1, int(round(float(n) * n_points)))
     raise BSFError(f"n must be an int count or a float fraction in (0, 1], got {n!r}")
-
-
-def edge_graph(mesh: Mesh) -> sp.csr_matrix:
-    """``(N, N)`` symmetric sparse graph of the mesh edges, weighted by edge length.
-
-    Note that scipy's csgraph reads an explicit 0 as "no edge": zero-length edges (duplicate
-    vertices) do not connect their endpoints.
-    """
-    f = mesh.faces
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    e = np.unique(np.sort(e, axis=1), axis=0)
-    w = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
-    n = mesh.n_vertices
-    rows = np.concatenate([e[:, 0], e[:, 1]])
-    cols = np.concatenate([e[:, 1], e[:, 0]])
-    return sp.csr_matrix((np.concatenate([w, w]), (rows, cols)), shape=(n, n))
 
 
 def _fps_points(points: jax.Array, first: jax.Array, n: int) -> jax.Array:

@@ -11,17 +11,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import BSFError
-from .mesh import Mesh
+from .mesh import Mesh, mesh_edges
 
-__all__ = ["mesh_edges", "subdivide"]
-
-
-def mesh_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unique undirected edges ``(e, 2)`` (sorted pairs) and, per face, the index of its edges
-    ``(m, 3)`` in the order (v0v1, v1v2, v2v0)."""
-    half = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    edges, inv = np.unique(np.sort(half, axis=1), axis=0, return_inverse=True)
-    return edges, inv.reshape(3, -1).T
+__all__ = ["subdivide"]
 
 
 def _loop_weights(n: int, faces: np.ndarray, edges: np.ndarray, face_edges: np.ndarray) -> sp.csr_matrix:

@@ -9,7 +9,7 @@ import scipy.sparse.csgraph
 
 import bsfjax
 from bsfjax import BSFError, farthest_point_sampling
-from bsfjax.sampling import edge_graph
+from bsfjax.mesh import edge_graph
 
 from .conftest import icosphere
 

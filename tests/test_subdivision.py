@@ -7,7 +7,8 @@ import pytest
 
 import bsfjax
 from bsfjax import Mesh
-from bsfjax.subdivision import mesh_edges, subdivide
+from bsfjax.mesh import mesh_edges
+from bsfjax.subdivision import subdivide
 
 from .conftest import icosphere
 
