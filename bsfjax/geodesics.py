@@ -32,7 +32,7 @@ import scipy.sparse.linalg
 
 from .errors import BSFError
 from .laplacian import laplacian
-from .mesh import Mesh
+from .mesh import Mesh, edge_graph, mesh_edges
 
 __all__ = ["geodesic_distances", "geodesic_error", "GEODESIC_METHODS"]
 
@@ -41,32 +41,14 @@ _DEFAULT_CHUNK = 256
 
 
 def _edges(mesh: Mesh) -> np.ndarray:
-    f = mesh.faces
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    return np.unique(np.sort(e, axis=1), axis=0)
-
-
-def _edge_graph(mesh: Mesh) -> sp.csr_matrix:
-    """Symmetric sparse graph of mesh edges weighted by length.
-
-    csgraph reads an explicit 0 as "no edge", so a zero-length edge gets the smallest positive
-    float instead (its endpoints stay connected at distance ~0).
-    """
-    e = _edges(mesh)
-    w = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
-    w = np.maximum(w, np.finfo(np.float64).tiny)
-    n = mesh.n_vertices
-    return sp.csr_matrix((np.concatenate([w, w]), (np.concatenate([e[:, 0], e[:, 1]]),
-                                                   np.concatenate([e[:, 1], e[:, 0]]))),
-                         shape=(n, n))
+    return mesh_edges(mesh.faces)[0]
 
 
 def _boundary_vertices(mesh: Mesh) -> np.ndarray:
     """Vertices on edges that belong to a single face."""
-    f = mesh.faces
-    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    uniq, counts = np.unique(e, axis=0, return_counts=True)
-    return np.unique(uniq[counts == 1])
+    edges, face_edges = mesh_edges(mesh.faces)
+    counts = np.bincount(face_edges.ravel(), minlength=len(edges))
+    return np.unique(edges[counts == 1])
 
 
 class _HeatSolver:
@@ -183,7 +165,7 @@ def _check_indices(idx, n: int, name: str) -> np.ndarray:
 
 def _distance_fn(mesh: Mesh, method: str):
     if method == "dijkstra":
-        graph = _edge_graph(mesh)
+        graph = edge_graph(mesh)
         return lambda src: scipy.sparse.csgraph.dijkstra(graph, directed=False, indices=src)
     return _HeatSolver(mesh).distances
 
