@@ -413,12 +413,27 @@ def _encode_batch(B, F, sqrt_w, dynamic, *, method, static):
     return alpha, info
 
 
+def _gram(B):
+    """``G = BᵀB`` (q, q).  In float64, a 0/1 frame (unweighted binary atoms) has integer
+    ``G ≤ n``, exact in float32 when ``n < 2²⁴``: that GEMM is about twice as fast, so it is
+    used whenever the atoms are 0/1 (checked at run time; weighted rows are not)."""
+    if B.dtype != jnp.float64 or B.shape[0] >= 2**24:
+        return B.T @ B
+    binary = jnp.all((B == 0) | (B == 1))
+    return jax.lax.cond(binary, lambda B: _gram32(B).astype(B.dtype), lambda B: B.T @ B, B)
+
+
+def _gram32(B):
+    B32 = B.astype(jnp.float32)
+    return B32.T @ B32
+
+
 def _lstsq(B, F, C, rcond):
     """Minimum-norm least squares via the eigendecomposition of ``G = BᵀB``."""
     dtype = B.dtype
     if rcond is None:
         rcond = math.sqrt(10 * float(jnp.finfo(dtype).eps))
-    lam, V = jnp.linalg.eigh(B.T @ B)
+    lam, V = jnp.linalg.eigh(_gram(B))
     keep = lam > (rcond * rcond) * lam[-1]  # s_i > rcond·s_max (lam ≥ 0 up to rounding)
     inv = jnp.where(keep, 1.0 / jnp.where(keep, lam, 1.0), 0.0)
 
@@ -465,7 +480,7 @@ def _omp(B, C, fnorm2, eps, n_steps: int, gram: bool, chunk: int):
     valid = norms > 0
     inv_norm = jnp.where(valid, 1.0 / jnp.where(valid, norms, 1.0), 0.0)
     if gram:
-        Gn = (B.T @ B) * inv_norm[:, None] * inv_norm[None, :]
+        Gn = _gram(B) * inv_norm[:, None] * inv_norm[None, :]
 
         def gram_rows(k):  # (b,) -> (b, q) rows of DᵀD
             return Gn[k]
@@ -578,7 +593,7 @@ def _lasso(B, C, fnorm2, lam, init, maxiter: int, tol: float):
     FISTA runs with step 1, and a step ``‖Δz‖`` bounds the change of the approximation,
     ``‖BΔα‖ ≤ √L‖Δα‖ = ‖f‖·‖Δz‖``: ``tol`` is relative to ``‖f‖`` and scale free.
     """
-    G = B.T @ B
+    G = _gram(B)
     L = _spectral_bound(G)
     Gh = G / L
     fnorm = jnp.sqrt(fnorm2)

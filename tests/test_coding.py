@@ -160,6 +160,17 @@ def test_lstsq_real_frame(faust):
     assert np.all(err <= 1e-4 * np.linalg.norm(F, axis=1))
 
 
+def test_gram_float64_binary_fast_path_is_exact():
+    """0/1 atoms: G is computed by a float32 GEMM (exact integers) — equal to float64 numpy."""
+    B = random_frame(32, n=300, q=70)
+    W = B * np.linspace(0.5, 1.5, 300)[:, None]  # not 0/1: the float64 GEMM
+    with jax.enable_x64(True):
+        for X in (B, W):
+            G = jax.jit(bsfjax.coding._gram)(jnp.asarray(X))
+            assert G.dtype == jnp.float64
+            np.testing.assert_allclose(G, X.T @ X, rtol=1e-14, atol=0)
+
+
 def test_lstsq_rcond_cuts_small_singular_values():
     """rcond = numpy's rcond: directions with s < rcond·s_max are dropped the same way."""
     rng = np.random.default_rng(3)
