@@ -35,8 +35,12 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxopt import ProximalGradient
-from jaxopt.prox import prox_lasso
+import warnings
+
+with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintained; it works
+    warnings.filterwarnings("ignore", message="JAXopt is no longer maintained")
+    from jaxopt import ProximalGradient
+    from jaxopt.prox import prox_lasso
 
 from .errors import BSFError
 from .frame import Frame

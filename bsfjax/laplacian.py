@@ -22,28 +22,28 @@ __all__ = ["laplacian", "cotangent_stiffness", "mass_matrix"]
 MASS_TYPES = ("mixed", "barycentric")
 
 
-def _corner_cotangents(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cotangent of the angle at each corner, ``(m, 3)``, and twice the face areas ``(m,)``.
+def _corner_geometry(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per face: cotangent of each corner's angle ``(3, m)``, twice the area ``(m,)`` and the
+    squared length of the edge opposite each corner ``(3, m)`` (corner-major rows).
 
-    Column c holds the corner at ``f[:, c]``, whose opposite edge is ``(f[:, c+1], f[:, c+2])``.
-    cot θ = (a·b) / ‖a×b‖ for the two edge vectors a, b leaving the corner.
+    Corner c sits at ``f[:, c]``; its opposite edge is e_c = p_{c+2} − p_{c+1}, and
+    cot θ_c = −(e_{c+1}·e_{c+2}) / ‖e_{c+1}×e_{c+2}‖ (every pair of edges has the same cross
+    norm, twice the area).  Coordinates are handled as separate ``(3, m)`` planes: contiguous
+    rows make this several times faster in numpy than ``(m, 3, 3)`` fancy indexing.
     """
-    P = v[f]  # (m, 3, 3): one gather for all corners
-    p0, p1, p2 = P[:, 0], P[:, 1], P[:, 2]
-    e0, e1, e2 = p2 - p1, p0 - p2, p1 - p0  # e_c is the edge opposite corner c
-    cross = np.cross(e1, e2)
-    dbl_area = np.linalg.norm(cross, axis=1)
-    safe = np.where(dbl_area > 0, dbl_area, 1.0)
-    cots = np.stack(
-        [
-            -np.einsum("ij,ij->i", e1, e2),  # corner 0: vectors -e2 (to p1) and e1 (to p2)
-            -np.einsum("ij,ij->i", e2, e0),
-            -np.einsum("ij,ij->i", e0, e1),
-        ],
-        axis=1,
-    ) / safe[:, None]
-    cots[dbl_area == 0] = 0.0  # zero-area faces contribute nothing rather than inf
-    return cots, dbl_area
+    ft = f.T
+    X, Y, Z = v[:, 0][ft], v[:, 1][ft], v[:, 2][ft]  # (3 corners, m)
+    nxt, prv = [2, 0, 1], [1, 2, 0]
+    ex, ey, ez = X[nxt] - X[prv], Y[nxt] - Y[prv], Z[nxt] - Z[prv]  # row c: e_c
+    sq = ex * ex + ey * ey + ez * ez
+    dots = ex[prv] * ex[nxt] + ey[prv] * ey[nxt] + ez[prv] * ez[nxt]  # row c: e_{c+1}·e_{c+2}
+    cx = ey[1] * ez[2] - ez[1] * ey[2]
+    cy = ez[1] * ex[2] - ex[1] * ez[2]
+    cz = ex[1] * ey[2] - ey[1] * ex[2]
+    dbl_area = np.sqrt(cx * cx + cy * cy + cz * cz)
+    cots = -dots / np.where(dbl_area > 0, dbl_area, 1.0)
+    cots[:, dbl_area == 0] = 0.0  # zero-area faces contribute nothing rather than inf
+    return cots, dbl_area, sq
 
 
 def _stiffness(f: np.ndarray, cots: np.ndarray, n: int) -> sp.csr_matrix:
@@ -52,33 +52,29 @@ def _stiffness(f: np.ndarray, cots: np.ndarray, n: int) -> sp.csr_matrix:
     # summing duplicate COO entries)
     i = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
     j = np.concatenate([f[:, 2], f[:, 0], f[:, 1]])
-    w = -0.5 * cots.T.ravel()
-    H = sp.coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
+    H = sp.coo_matrix((-0.5 * cots.ravel(), (i, j)), shape=(n, n)).tocsr()
     off = H + H.T
     return (off - sp.diags(np.asarray(off.sum(axis=1)).ravel())).tocsr()
 
 
 def cotangent_stiffness(mesh: Mesh) -> sp.csr_matrix:
     """Positive semidefinite cotangent stiffness matrix ``W`` (n × n, CSR, float64)."""
-    cots, _ = _corner_cotangents(mesh.vertices, mesh.faces)
+    cots, _, _ = _corner_geometry(mesh.vertices, mesh.faces)
     return _stiffness(mesh.faces, cots, mesh.n_vertices)
 
 
-def _mass(v: np.ndarray, f: np.ndarray, cots: np.ndarray, dbl_area: np.ndarray, n: int,
+def _mass(f: np.ndarray, cots: np.ndarray, dbl_area: np.ndarray, sq: np.ndarray, n: int,
           kind: str) -> np.ndarray:
     area = 0.5 * dbl_area
     if kind == "barycentric":
-        per_corner = np.repeat(area[:, None] / 3.0, 3, axis=1)
+        per_corner = np.broadcast_to(area / 3.0, (3, area.size))
     else:
-        p = [v[f[:, c]] for c in range(3)]
-        sq = np.stack([np.sum((p[(c + 2) % 3] - p[(c + 1) % 3]) ** 2, axis=1) for c in range(3)], 1)
         # Voronoi share of corner c: ⅛ Σ over its two edges of |edge|² cot(opposite corner)
         sc = sq * cots
-        vor = (np.roll(sc, -1, axis=1) + np.roll(sc, -2, axis=1)) / 8.0
+        vor = (sc[[1, 2, 0]] + sc[[2, 0, 1]]) / 8.0
         obtuse = cots < 0  # cot θ < 0 ⇔ θ > 90°
-        any_obtuse = obtuse.any(axis=1, keepdims=True)
-        per_corner = np.where(any_obtuse, np.where(obtuse, area[:, None] / 2, area[:, None] / 4), vor)
-    return np.bincount(f.ravel(), weights=per_corner.ravel(), minlength=n)
+        per_corner = np.where(obtuse.any(axis=0), np.where(obtuse, area / 2, area / 4), vor)
+    return np.bincount(f.T.ravel(), weights=per_corner.ravel(), minlength=n)
 
 
 def mass_matrix(mesh: Mesh, kind: str = "mixed") -> sp.csr_matrix:
@@ -92,8 +88,8 @@ def mass_matrix(mesh: Mesh, kind: str = "mixed") -> sp.csr_matrix:
     """
     if kind not in MASS_TYPES:
         raise ValueError(f"mass must be one of {MASS_TYPES}, got {kind!r}")
-    cots, dbl_area = _corner_cotangents(mesh.vertices, mesh.faces)
-    return sp.diags(_mass(mesh.vertices, mesh.faces, cots, dbl_area, mesh.n_vertices, kind)).tocsr()
+    cots, dbl_area, sq = _corner_geometry(mesh.vertices, mesh.faces)
+    return sp.diags(_mass(mesh.faces, cots, dbl_area, sq, mesh.n_vertices, kind)).tocsr()
 
 
 def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp.csr_matrix, sp.csr_matrix]:
@@ -124,9 +120,9 @@ def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp
     if mass not in MASS_TYPES:
         raise ValueError(f"mass must be one of {MASS_TYPES}, got {mass!r}")
     v, f, n = mesh.vertices, mesh.faces, mesh.n_vertices
-    cots, dbl_area = _corner_cotangents(v, f)  # shared by W and A
+    cots, dbl_area, sq = _corner_geometry(v, f)  # shared by W and A
     W = _stiffness(f, cots, n)
-    a = _mass(v, f, cots, dbl_area, n, mass)
+    a = _mass(f, cots, dbl_area, sq, n, mass)
     A = sp.diags(a).tocsr()
     bad = a <= 0
     if bad.any():
