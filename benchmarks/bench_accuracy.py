@@ -19,6 +19,7 @@ import json
 import time
 from pathlib import Path
 
+from bsfjax._files import write_text_atomic
 from bsfjax.baselines import CODERS
 from bsfjax.datasets import load_dataset
 from bsfjax.experiments import pivot_markdown, summarize, transfer_experiment
@@ -50,7 +51,7 @@ def main(argv=None) -> int:
     result = {"data": args.data, "pairs": pairs, "functions_per_pair": args.functions,
               "seed": args.seed, "ks": ks, "error": "sqrt(sum A (f - g)^2) / sqrt(sum A f^2)",
               "approximation": approx, "transfer": transfer, "wall_s": wall}
-    (out / "accuracy.json").write_text(json.dumps(result, indent=1))
+    write_text_atomic(out / "accuracy.json", json.dumps(result, indent=1))
     std = {s["k"]: s["mean"] for s in approx if s["method"] == "std"}
     beats = [f"- k = {s['k']}: {s['method']} {s['mean']:.3f} vs std {std[s['k']]:.3f} "
              f"({'beats' if s['mean'] < std[s['k']] else 'does NOT beat'} the projection)"
@@ -62,7 +63,7 @@ def main(argv=None) -> int:
           + "\n\n## Transfer with the ground-truth map (Eq. 15)\n\n"
           + pivot_markdown(rows, "method", "k") + "\n\n## BSF vs projection (approximation)\n\n"
           + "\n".join(beats) + f"\n\nWall time {wall:.0f} s.\n")
-    (out / "accuracy.md").write_text(md)
+    write_text_atomic(out / "accuracy.md", md)
     print(md)
     return 0
 

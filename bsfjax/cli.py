@@ -1,4 +1,4 @@
-"""The ``bsfjax`` command line: ``demo``, ``transfer``, ``reproduce``, ``spectrum``.
+"""The ``bsfjax`` command line: ``demo``, ``example``, ``transfer``, ``reproduce``, ``spectrum``.
 
 Bad input ends with a one-line message on stderr and exit status 2, never a traceback, and no
 partial output file (every output is written atomically, after all the work is done).
@@ -31,6 +31,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.set_defaults(func=_cmd_demo)
 
+    p = sub.add_parser("example", help="write the built-in example pair (meshes, segmentation, "
+                                       "ground truth, landmarks) to files, to try 'transfer' on")
+    p.add_argument("--out", default="bsfjax-example", help="output folder (default ./bsfjax-example)")
+    p.add_argument("--levels", type=int, default=3,
+                   help="subdivision levels: 126*4^levels+2 vertices (default 3: 8066)")
+    p.set_defaults(func=_cmd_example)
+
     p = sub.add_parser("transfer", help="transfer a segmentation or a function from one mesh to another")
     p.add_argument("source", help="source mesh (OFF, PLY, OBJ, STL, ...)")
     p.add_argument("target", help="target mesh")
@@ -47,6 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mesh-out", help="also write the target mesh coloured by the result (.ply)")
     p.add_argument("--threshold", type=float, default=0.5,
                    help="labels: a target vertex whose best score is below this is unassigned (-1)")
+    p.add_argument("--truth", help="labels: ground-truth label per target vertex (.txt or .npy); "
+                                   "report the share of the target's area labelled correctly")
     p.set_defaults(func=_cmd_transfer)
 
     p = sub.add_parser("spectrum", help="compute the Laplace-Beltrami spectrum of a mesh")
@@ -144,6 +153,8 @@ def _cmd_transfer(args) -> int:
         raise CLIError(f"--method must be one of {', '.join(TRANSFER_METHODS)}, got {args.method!r}")
     if Path(args.out).suffix not in (".npy", ".txt"):
         raise CLIError(f"--out {args.out}: use a .txt or .npy file name")
+    if args.truth and not args.labels:
+        raise CLIError("--truth compares labels: use it with --labels")
     if args.mesh_out and Path(args.mesh_out).suffix.lower() != ".ply":
         raise CLIError(f"--mesh-out {args.mesh_out}: use a .ply file name")
     kind, *rest = args.map
@@ -163,6 +174,12 @@ def _cmd_transfer(args) -> int:
     if values.shape[-1] != source.n_vertices:
         raise CLIError(f"{'labels' if args.labels else 'function'} file has {values.shape[-1]} "
                        f"entries per function but the source mesh has {source.n_vertices} vertices")
+    truth = None
+    if args.truth:
+        truth = _read_array(args.truth, "truth", dtype=int)
+        if truth.shape != (target.n_vertices,):
+            raise CLIError(f"truth file {args.truth}: expected one label per target vertex "
+                           f"({target.n_vertices}), got shape {truth.shape}")
     k = args.k
     kmax = min(source.n_vertices, target.n_vertices) - 1
     if not 1 <= k <= kmax:
@@ -197,6 +214,11 @@ def _cmd_transfer(args) -> int:
         result = res.labels.astype(np.int64)
         print(f"transferred {int(values.max()) + 1} labels with {args.method}; unassigned: "
               f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
+        if truth is not None:
+            area = np.asarray(sn.mass)
+            correct = result == truth
+            print(f"accuracy against {args.truth}: {np.sum(area * correct) / np.sum(area):.1%} of "
+                  f"the target area ({np.mean(correct):.1%} of its vertices)", file=sys.stderr)
     else:
         result = transfer_values(sm, sn, values, **common)
         result = result.T if result.ndim == 2 else result
@@ -218,6 +240,40 @@ def _cmd_transfer(args) -> int:
         save_mesh(args.mesh_out, target, point_data=data)
     _write_array(args.out, result)
     print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else ""), file=sys.stderr)
+    return 0
+
+
+def _cmd_example(args) -> int:
+    import numpy as np
+
+    from ._files import write_text_atomic
+    from .demo import example_landmarks
+    from .example import example_pair
+    from .mesh import save_mesh
+
+    if not 1 <= args.levels <= 4:
+        raise CLIError(f"--levels must be in [1, 4], got {args.levels}")
+    pair = example_pair(levels=args.levels)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    save_mesh(out / "source.ply", pair.source)
+    save_mesh(out / "target.ply", pair.target)
+    lines = lambda a: "\n".join(str(int(x)) for x in a) + "\n"  # noqa: E731
+    write_text_atomic(out / "labels.txt", lines(pair.labels))
+    write_text_atomic(out / "target_labels.txt", lines(pair.labels[pair.p2p]))
+    write_text_atomic(out / "p2p.txt", lines(pair.p2p))
+    lm = ",".join(str(int(i)) for i in example_landmarks(pair))
+    write_text_atomic(out / "landmarks.txt", f"{lm}:{lm}\n")
+    print(f"wrote the built-in pair ({pair.source.n_vertices} vertices, "
+          f"{len(pair.label_names)} parts: {', '.join(pair.label_names)}) to {out}/:\n"
+          "  source.ply, target.ply    the two poses (vertex i <-> vertex i)\n"
+          "  labels.txt                part label per source vertex\n"
+          "  target_labels.txt         ground-truth part label per target vertex\n"
+          "  p2p.txt                   ground-truth point map (source vertex per target vertex)\n"
+          "  landmarks.txt             one landmark per part, 'source:target'\n"
+          f"try:\n  bsfjax transfer {out}/source.ply {out}/target.ply --labels {out}/labels.txt "
+          f"--landmarks {lm}:{lm} --truth {out}/target_labels.txt --out labels_out.txt "
+          "--mesh-out coloured.ply")
     return 0
 
 

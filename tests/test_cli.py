@@ -108,3 +108,62 @@ def test_transfer_command_bad_input(cli_files, extra, match):
     r = run("transfer", str(d / "nope.ply"), str(d / "tgt.off"), "--labels", str(d / "labels.txt"),
             "--out", str(out))
     assert r.returncode == 2 and "nope.ply: no such file" in r.stderr and not out.exists()
+
+
+def test_example_command_writes_a_pair_that_transfer_reads(tmp_path, capsys):
+    d = tmp_path / "ex"
+    assert main(["example", "--out", str(d), "--levels", "2"]) == 0
+    pair = bsfjax.example_pair(levels=2)
+    src = bsfjax.load_mesh(d / "source.ply")
+    np.testing.assert_allclose(src.vertices, pair.source.vertices, rtol=1e-6, atol=1e-6)
+    np.testing.assert_array_equal(np.loadtxt(d / "labels.txt", dtype=int), pair.labels)
+    np.testing.assert_array_equal(np.loadtxt(d / "target_labels.txt", dtype=int),
+                                  pair.labels[pair.p2p])
+    lm = (d / "landmarks.txt").read_text().strip()
+    assert "bsfjax transfer" in capsys.readouterr().out
+    out = tmp_path / "out.txt"
+    rc = main(["transfer", str(d / "source.ply"), str(d / "target.ply"), "--labels",
+               str(d / "labels.txt"), "--landmarks", lm, "--truth", str(d / "target_labels.txt"),
+               "-k", "20", "--out", str(out)])
+    assert rc == 0
+    err = capsys.readouterr().err
+    reported = float(err.split("accuracy against")[1].split(":")[1].split("%")[0]) / 100
+    got = np.loadtxt(out, dtype=int)
+    mass = bsfjax.spectrum(pair.target, 2).mass
+    assert reported == pytest.approx(np.sum(mass * (got == pair.labels)) / np.sum(mass), abs=1e-3)
+    assert reported > 0.8
+
+
+def test_truth_needs_labels_and_the_target_length(cli_files):
+    d, _ = cli_files
+    out = d / "never_truth.txt"
+    base = ["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--out", str(out)]
+    r = run(*base, "--function", str(d / "labels.txt"), "--truth", str(d / "labels.txt"))
+    assert r.returncode == 2 and "--truth compares labels" in r.stderr and not out.exists()
+    r = run(*base, "--labels", str(d / "labels.txt"), "--truth", str(d / "short.txt"))
+    assert r.returncode == 2 and "expected one label per target vertex" in r.stderr
+    assert not out.exists()
+
+
+def test_transfer_between_real_meshes_with_landmarks(tmp_path, capsys):
+    """FAUST tr_reg_000 -> tr_reg_001 (identity ground truth): an 8-part Voronoi segmentation,
+    an estimated map from WKS + 5 landmarks, a label file and a coloured PLY."""
+    from tests.conftest import data_path
+
+    a, b = data_path("faust", "tr_reg_000.off"), data_path("faust", "tr_reg_001.off")
+    m = bsfjax.load_mesh(a)
+    v = np.asarray(m.vertices)
+    c = np.asarray(bsfjax.farthest_point_sampling(m, 8, seed=0))
+    labels = np.argmin(((v[:, None, :] - v[c][None]) ** 2).sum(-1), axis=1)
+    np.savetxt(tmp_path / "labels.txt", labels, fmt="%d")
+    lm = ",".join(str(int(i)) for i in bsfjax.farthest_point_sampling(m, 5, seed=0))
+    out, ply = tmp_path / "out.npy", tmp_path / "coloured.ply"
+    rc = main(["transfer", str(a), str(b), "--labels", str(tmp_path / "labels.txt"),
+               "--landmarks", f"{lm}:{lm}", "--truth", str(tmp_path / "labels.txt"), "-k", "20",
+               "--out", str(out), "--mesh-out", str(ply)])
+    assert rc == 0
+    got = np.load(out)
+    assert got.shape == (m.n_vertices,) and np.mean(got == labels) > 0.8
+    import meshio
+
+    np.testing.assert_array_equal(meshio.read(ply).point_data["label"], got)
