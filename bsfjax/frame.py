@@ -1,6 +1,7 @@
 """The Binary Sparse Frame (paper Sec. 4, Algorithm 1) and its transfer by a functional map.
 
-Owner of: ``Frame``, ``build_frame``, ``transfer_frame``.
+Owner of: ``Frame``, ``build_frame``, ``transfer_frame``, ``adaptive_taus``, ``unique_atoms``,
+``prune_frame``.
 
 Build (Algorithm 1).  For every scale τ and centre x, the band-limited heat kernel
 
@@ -327,6 +328,8 @@ def build_frame(spectrum: Spectrum, centers, taus=(1e-3, 5e-3, 1e-2), gamma=0.75
     if isinstance(taus, str):
         if taus != "adaptive":
             raise BSFError(f"taus must be numbers or 'adaptive', got {taus!r}")
+        if np.size(gamma) != 1:
+            raise BSFError(f"taus='adaptive' takes one gamma for all its scales, got {gamma!r}")
         g1 = _check_gammas(gamma, 1)
         t = adaptive_taus(spectrum, c, gamma=float(g1[0]), tau_convention=tau_convention)
         g = np.repeat(g1, ADAPTIVE_N_SCALES)
@@ -458,6 +461,8 @@ def prune_frame(frame: Frame, alpha=None):
         rep = np.where(B.any(axis=0), first[inv.reshape(-1)], -1).astype(np.int32)
         keep = rep == np.arange(rep.size)
     kept = np.flatnonzero(keep)
+    if kept.size == 0:
+        raise BSFError("every atom of the frame is empty: nothing to keep")
     cols = kept if frame.columns is None else np.asarray(frame.columns)[kept]
     out = Frame(atoms=frame.atoms[:, kept], coeffs=frame.coeffs[:, kept],
                 taus=frame.taus[kept], centers=frame.centers[kept], mass=frame.mass,

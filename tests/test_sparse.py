@@ -183,6 +183,9 @@ def test_prune_frame_records_columns_and_merges_codes():
         bsfjax.prune_frame(fr, np.zeros((2, 3)))
     with pytest.raises(BSFError, match="concrete"):
         jax.jit(bsfjax.prune_frame)(fr)
+    with pytest.raises(BSFError, match="empty"):
+        bsfjax.prune_frame(Frame(atoms=jnp.zeros((4, 3)), coeffs=jnp.zeros((2, 3)),
+                                 taus=jnp.ones(3), centers=jnp.arange(3), mass=jnp.ones(4)))
 
 
 def test_pruned_lstsq_is_full_rank_and_same_fit():
