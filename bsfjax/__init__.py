@@ -18,7 +18,8 @@ from .mesh import Mesh, load_mesh, save_mesh
 from .example import ExamplePair, example_mesh, example_pair
 from .spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_operators
 from .sampling import farthest_point_sampling
-from .frame import Frame, build_frame, transfer_frame
+from .frame import (Frame, adaptive_taus, build_frame, prune_frame, transfer_frame,
+                    unique_atoms)
 from .coding import CodingInfo, decode, encode
 from .pipeline import PairResult, approximate, stack_spectra, transfer, transfer_pairs
 from .descriptors import hks, wks
@@ -66,6 +67,9 @@ __all__ = [
     "build_frame",
     "farthest_point_sampling",
     "transfer_frame",
+    "adaptive_taus",
+    "prune_frame",
+    "unique_atoms",
     "Mesh",
     "MeshError",
     "Spectrum",

@@ -47,13 +47,15 @@ import numpy as np
 
 from .coding import decode, encode
 from .errors import BSFError
-from .frame import build_frame, transfer_frame
+from .frame import build_frame, transfer_frame, unique_atoms
 from .spectrum import Spectrum
 
-__all__ = ["METHODS", "CODERS", "TRANSFER_ONLY", "Params", "PairInput", "BaselineResult",
+__all__ = ["METHODS", "CODERS", "FRAME_TRANSFERS", "TRANSFER_ONLY", "Params", "PairInput", "BaselineResult",
            "run_baseline", "geodesic_ball_radii", "product_basis"]
 
 CODERS = ("lstsq", "omp_error", "omp", "lasso")
+#: How the BSF is carried to the target (:attr:`Params.frame_transfer`).
+FRAME_TRANSFERS = ("binary", "p2p")
 METHODS = ("std", "std2", "p2p", "prod", "geod", "heat") + CODERS
 #: Methods without an approximation on the source (only a transfer).
 TRANSFER_ONLY = ("p2p",)
@@ -64,7 +66,8 @@ class Params:
     """Settings of the frames and coders (static; defaults are the paper's).
 
     Attributes:
-        taus: BSF diffusion scales (``tau_convention`` of :func:`bsfjax.build_frame`).
+        taus: BSF diffusion scales (``tau_convention`` of :func:`bsfjax.build_frame`), or
+            ``"adaptive"`` (:func:`bsfjax.adaptive_taus`, chosen per shape and k).
         gamma: BSF threshold γ.
         tau_convention: ``"unit_area"`` (default) or ``"raw"``.
         sparsity: OMP's ``S``.
@@ -80,6 +83,13 @@ class Params:
             truncated ``C`` no longer cancel (transfer error 0.9 at k = 10 and 1.8 at k = 30 on
             FAUST 000→001 with the ground-truth map).  ``3e-2`` was the best of
             {1e-3, 1e-2, 3e-2, 1e-1} on that pair (0.39 / 0.28), i.e. tuned in prod's favour.
+        prune: code the BSF in its distinct non-empty atoms only (duplicates and empties are
+            masked, :func:`bsfjax.unique_atoms`; same span, no ties between equal columns).
+        frame_transfer: how the BSF reaches the target: ``"binary"`` (paper Eq. 11–12,
+            re-binarize ``Φ_N C a``) or ``"p2p"`` (pull the atoms back through
+            ``pair.p2p``, :func:`bsfjax.transfer_frame`'s ``p2p``).
+        lasso_target: if set, the lasso chooses λ per function for at most this many atoms
+            (:func:`bsfjax.encode`'s ``target_atoms``) instead of using ``lam``.
     """
 
     taus: tuple = (1e-3, 5e-3, 1e-2)
@@ -93,12 +103,29 @@ class Params:
     frame_coder: str = "omp"
     geod_level: float = 0.5
     prod_rcond: float = 3e-2
+    prune: bool = False
+    frame_transfer: str = "binary"
+    lasso_target: int | None = None
 
     def __post_init__(self):
-        taus = tuple(float(t) for t in np.atleast_1d(self.taus))
-        object.__setattr__(self, "taus", taus)
-        if not taus or not all(np.isfinite(t) and t > 0 for t in taus):
-            raise BSFError(f"taus must be positive, got {self.taus!r}")
+        if isinstance(self.taus, str):
+            if self.taus != "adaptive":
+                raise BSFError(f"taus must be positive numbers or 'adaptive', got {self.taus!r}")
+        else:
+            taus = tuple(float(t) for t in np.atleast_1d(self.taus))
+            object.__setattr__(self, "taus", taus)
+            if not taus or not all(np.isfinite(t) and t > 0 for t in taus):
+                raise BSFError(f"taus must be positive, got {self.taus!r}")
+        if not isinstance(self.prune, bool):
+            raise BSFError(f"prune must be a bool, got {self.prune!r}")
+        if self.frame_transfer not in FRAME_TRANSFERS:
+            raise BSFError(f"frame_transfer must be one of {FRAME_TRANSFERS}, got "
+                           f"{self.frame_transfer!r}")
+        if self.lasso_target is not None and (
+                isinstance(self.lasso_target, bool)
+                or not isinstance(self.lasso_target, (int, np.integer)) or self.lasso_target < 1):
+            raise BSFError(f"lasso_target must be None or a positive int, got "
+                           f"{self.lasso_target!r}")
         if not 0 < self.gamma < 1:
             raise BSFError(f"gamma must be in (0, 1), got {self.gamma!r}")
         if isinstance(self.sparsity, bool) or not isinstance(self.sparsity, (int, np.integer)) \
@@ -174,6 +201,9 @@ def _coder_options(coder: str, params: Params, F, w):
         fn2 = jnp.sum((F * F) * (w if w is not None else 1.0), axis=-1)
         return {"eps": params.eps_fraction ** 2 * fn2}
     if coder == "lasso":
+        if params.lasso_target is not None:
+            return {"target_atoms": params.lasso_target,
+                    "maxiter": params.lasso_maxiter}
         return {"lam": params.lam, "maxiter": params.lasso_maxiter}
     return {}
 
@@ -182,9 +212,9 @@ def _code(atoms, F, coder: str, params: Params, mass):
     """α of ``F`` in ``atoms`` (a plain (n, q) array), area weighted per ``params``."""
     w = mass if params.weights == "area" else None
     opts = _coder_options(coder, params, F, w)
-    sparsity = opts.get("sparsity")
-    if sparsity is not None and sparsity > atoms.shape[-1]:
-        opts["sparsity"] = atoms.shape[-1]
+    for name in ("sparsity", "target_atoms"):
+        if opts.get(name) is not None and opts[name] > atoms.shape[-1]:
+            opts[name] = atoms.shape[-1]
     return encode(atoms, F, coder, weights=w, **opts)
 
 
@@ -249,16 +279,20 @@ def _bsf(pair, k, params):
 def _ours(coder):
     def kernel(pair, F, k, params):
         frame = _bsf(pair, k, params)
-        alpha = _code(frame.atoms, F, coder, params, pair.source.mass)
-        return decode(frame, alpha), lambda C: decode(transfer_frame(frame, C, pair.target),
-                                                      alpha)
+        atoms = frame.atoms
+        if params.prune:  # masked duplicates / empties get α = 0
+            atoms = atoms * unique_atoms(atoms)[0].astype(atoms.dtype)
+        alpha = _code(atoms, F, coder, params, pair.source.mass)
+        p2p = pair.p2p if params.frame_transfer == "p2p" else None
+        return decode(atoms, alpha), lambda C: decode(
+            transfer_frame(frame, C, pair.target, p2p=p2p), alpha)
 
     return kernel
 
 
 def _geod(pair, F, k, params):
     frame = _bsf(pair, k, params)
-    n_s = len(params.taus)
+    n_s = frame.n_atoms // int(np.shape(pair.centers)[-1])
     radii = geodesic_ball_radii(frame.atoms, pair.source.mass, n_s)
     D = jnp.asarray(pair.distances, F.dtype)  # (n_c, n)
     atoms = (D[None, :, :] <= radii[:, None, None]).reshape(-1, D.shape[1]).T.astype(F.dtype)
@@ -312,7 +346,8 @@ def _shape(x):
     return None if x is None else tuple(np.shape(x))
 
 
-def _check_pair(method: str, pair: PairInput, k: int, transfer: bool, batched: bool):
+def _check_pair(method: str, pair: PairInput, k: int, transfer: bool, batched: bool,
+                params: Params = Params()):
     b = 1 if batched else 0
     src = pair.source
     if not isinstance(src, Spectrum):
@@ -325,6 +360,11 @@ def _check_pair(method: str, pair: PairInput, k: int, transfer: bool, batched: b
     if method in ("geod", "heat", *CODERS):
         if pair.centers is None:
             raise BSFError(f"method {method!r} needs pair.centers (the BSF centres)")
+    if method in CODERS and params.frame_transfer == "p2p" and transfer:
+        n_n = np.shape(pair.target.evecs)[b] if pair.target is not None else None
+        if pair.p2p is None or _shape(pair.p2p)[b:] != (n_n,):
+            raise BSFError(f"frame_transfer='p2p' needs pair.p2p of shape ({n_n},) (target → "
+                           f"source vertex), got {_shape(pair.p2p)}")
     if method == "geod":
         if pair.distances is None:
             raise BSFError("method 'geod' needs pair.distances: (n_c, n_M) geodesic distances "
@@ -401,7 +441,7 @@ def run_baseline(method: str, pair: PairInput, f, *, k: int | None = None,
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
         raise BSFError(f"k must be a positive int, got {k!r}")
     k = int(k)
-    _check_pair(method, pair, k, transfer, batched)
+    _check_pair(method, pair, k, transfer, batched, params)
     if k_targets is not None:
         if not transfer or method in ("std2", "p2p"):
             raise BSFError("k_targets needs transfer=True and a method other than 'std2' and "

@@ -65,9 +65,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_spectrum)
 
     p = sub.add_parser("reproduce", help="run one of the paper's experiments (tables 1-5, "
-                       "figures 7 and 10) on a data folder; writes CSV, Markdown and PNG")
+                       "figures 7 and 10) or the 'sparse' study on a data folder; writes CSV, "
+                       "Markdown and PNG")
     p.add_argument("name", choices=("table1", "table2", "fig7", "table3", "table4", "table5",
-                                    "fig10"), help="experiment")
+                                    "fig10", "sparse"), help="experiment")
     p.add_argument("--data", required=True, help="folder of meshes with ground truth (FAUST-style "
                    "shared vertex order, or corres/<name>.vts files; class subfolders for TOSCA)")
     p.add_argument("--out", required=True, help="output folder")
@@ -77,7 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "shape (default 100)")
     p.add_argument("--seed", type=int, default=0, help="seed of pairs, functions and FPS")
     p.add_argument("--k", default=None, help="comma-separated k list overriding the "
-                   "experiment's (fig7: k_M values; fig10: its k)")
+                   "experiment's (fig7: k_M values; fig10, sparse: its k)")
     p.add_argument("--cache", default=None, help="eigenbasis cache folder (default OUT/.spectra)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=lambda a: __import__("bsfjax.experiments", fromlist=["x"]).cli(a))

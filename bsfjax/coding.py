@@ -54,7 +54,7 @@ _DEFAULTS: dict[str, dict[str, Any]] = {
     "lstsq": {"rcond": None},
     "omp": {"sparsity": 10, "precompute": "auto"},
     "omp_error": {"eps": None, "max_atoms": 64, "precompute": "auto"},
-    "lasso": {"lam": 0.01, "init": None, "maxiter": 10000, "tol": 1e-4},
+    "lasso": {"lam": 0.01, "init": None, "maxiter": 10000, "tol": 1e-4, "target_atoms": None},
 }
 
 #: Fraction of ‖f‖ the default error bound of ``"omp_error"`` allows (paper: ε = ‖f‖/10).
@@ -196,6 +196,15 @@ def _check_options(method, options, q, lead_shape):
             dynamic["eps"] = eps
     if method == "lasso":
         dynamic["lam"] = _check_positive("lam", opts["lam"])
+        target = opts["target_atoms"]
+        if target is not None:
+            target = _check_int("target_atoms", target, 1, q, f"q={q}")
+            if "lam" in options:
+                raise BSFError("give lam or target_atoms, not both (target_atoms chooses λ)")
+            if opts["init"] is not None:
+                raise BSFError("init cannot be combined with target_atoms (the bisection "
+                               "starts from α = 0)")
+        static["target_atoms"] = target
         static["maxiter"] = _check_int("maxiter", opts["maxiter"], 1, 10**9)
         static["tol"] = _check_positive("tol", opts["tol"])
         init = opts["init"]
@@ -297,6 +306,9 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
             same ``lam`` means the same relative sparsity pressure whatever the scale of ``f``
             (``λ ≥ ‖Bᵀf‖∞`` is the smallest value giving ``α = 0``, so ``lam ≥ 1`` gives 0);
             ``init``: ``(..., q)`` warm start (e.g. the solution for a nearby ``lam``);
+            ``target_atoms``: instead of ``lam``, choose ``lam`` per function by bisection
+            so that the code has at most that many non-zeros (as many as the bisection finds;
+            ``info.n_atoms`` says how many);
             ``maxiter`` (10000) and ``tol`` (1e-4): FISTA with step ``1/L`` (``L ≥ λ_max(G)``)
             stops, per function, when one iteration changes the coefficients by
             ``√L·‖Δα‖ ≤ tol·‖f‖`` — a bound on the change of the approximation ``‖BΔα‖``
@@ -404,9 +416,13 @@ def _encode_batch(B, F, sqrt_w, dynamic, *, method, static):
                                        static["chunk"])
         if method == "omp":
             converged = (n_sel == static["n_steps"]) | exhausted
-    else:  # lasso
+    elif static["target_atoms"] is None:  # lasso with a given λ
         alpha, err = _lasso(B, C, fnorm2, dynamic["lam"], dynamic["init"],
                             static["maxiter"], static["tol"])
+        converged = err <= static["tol"]
+    else:  # lasso, λ per function for a target number of atoms
+        alpha, err = _lasso_target(B, C, fnorm2, static["target_atoms"], static["maxiter"],
+                                   static["tol"])
         converged = err <= static["tol"]
     R = F - alpha @ B.T
     res2 = jnp.sum(R * R, axis=1)
@@ -588,7 +604,46 @@ def _spectral_bound(G, iters: int = 30):
     return jnp.where(bound > 0, bound, 1.0)
 
 
+#: Bisection steps of ``target_atoms`` (on log λ in [log LAM_MIN, 0]) and its lower end.
+LASSO_TARGET_STEPS = 14
+LASSO_LAM_MIN = 1e-4
+
+
+def _lasso_target(B, C, fnorm2, target: int, maxiter: int, tol: float):
+    r"""Lasso whose relative λ is chosen per function so that ``‖α‖₀ ≤ target``, as large a
+    support as bisection finds.
+
+    ``lam = 1`` gives ``α = 0`` (feasible).  Bisection on ``log lam`` ∈ ``[log 1e-4, 0]``
+    (:data:`LASSO_TARGET_STEPS` steps, each a warm-started FISTA solve, G formed once): a step
+    whose solution has at most ``target`` non-zeros becomes the new feasible end.  The result
+    is the solution at the smallest feasible λ tried (the support size is not monotone in λ in
+    general, so ``n_atoms`` may fall short of ``target``; it never exceeds it)."""
+    G = _gram(B)
+    L = _spectral_bound(G)
+    m, q = C.shape
+    lo = jnp.full((m,), math.log(LASSO_LAM_MIN), C.dtype)
+    hi = jnp.zeros((m,), C.dtype)
+    best = jnp.zeros_like(C)
+    err = jnp.zeros((m,), C.dtype)
+
+    def step(_, state):
+        lo, hi, best, err = state
+        mid = 0.5 * (lo + hi)
+        a, e = _lasso_solve(G, L, C, fnorm2, jnp.exp(mid), best, maxiter, tol)
+        feas = jnp.sum(a != 0, axis=1) <= target
+        return (jnp.where(feas, lo, mid), jnp.where(feas, mid, hi),
+                jnp.where(feas[:, None], a, best), jnp.where(feas, e, err))
+
+    _, _, best, err = jax.lax.fori_loop(0, LASSO_TARGET_STEPS, step, (lo, hi, best, err))
+    return best, err
+
+
 def _lasso(B, C, fnorm2, lam, init, maxiter: int, tol: float):
+    G = _gram(B)
+    return _lasso_solve(G, _spectral_bound(G), C, fnorm2, lam, init, maxiter, tol)
+
+
+def _lasso_solve(G, L, C, fnorm2, lam, init, maxiter: int, tol: float):
     r"""``min_α ½αᵀGα − αᵀc + λ‖α‖₁`` per row ``c`` of ``C``, ``λ = lam·‖c‖∞``.
 
     Solved in normalised coordinates ``α = s·z`` with ``s = ‖f‖ / √L`` (``L ≥ λ_max(G)``):
@@ -597,8 +652,6 @@ def _lasso(B, C, fnorm2, lam, init, maxiter: int, tol: float):
     FISTA runs with step 1, and a step ``‖Δz‖`` bounds the change of the approximation,
     ``‖BΔα‖ ≤ √L‖Δα‖ = ‖f‖·‖Δz‖``: ``tol`` is relative to ``‖f‖`` and scale free.
     """
-    G = _gram(B)
-    L = _spectral_bound(G)
     Gh = G / L
     fnorm = jnp.sqrt(fnorm2)
     has = fnorm > 0

@@ -1,6 +1,7 @@
 """The Binary Sparse Frame (paper Sec. 4, Algorithm 1) and its transfer by a functional map.
 
-Owner of: ``Frame``, ``build_frame``, ``transfer_frame``.
+Owner of: ``Frame``, ``build_frame``, ``transfer_frame``, ``adaptive_taus``, ``unique_atoms``,
+``prune_frame``.
 
 Build (Algorithm 1).  For every scale τ and centre x, the band-limited heat kernel
 
@@ -8,6 +9,17 @@ Build (Algorithm 1).  For every scale τ and centre x, the band-limited heat ker
 
 is normalized to ``ĝ = |g| / max_v |g|`` and thresholded: the atom is ``1`` where ``ĝ ≥ γ``.
 Subtracting λ_1 only rescales g (undone by the normalization) and keeps ĝ_τ,1 = 1.
+
+Adaptive scales (:func:`adaptive_taus`, ``build_frame(..., taus="adaptive")``).  The paper's
+fixed τ ∈ {0.001, 0.005, 0.01} give atoms whose size is set by the band limit once k is large
+(at k = 50 on FAUST all three cover 1.4–4 % of the area), so sparse codes lack large atoms.
+The adaptive choice measures the mean area share of the atoms as a function of τ on the
+spectrum itself and picks a geometric series of shares from 1 % to 20 % of the surface.
+
+Hygiene (:func:`unique_atoms`, :func:`prune_frame`).  Binarization can make two columns
+identical (two scales at one centre, or neighbouring centres) or empty (a kernel that vanished
+after transfer); such columns are masked or dropped, and ``Frame.columns`` records which of the
+built columns remain.
 
 Transfer (Eq. 11–12).  A functional map ``C`` ``(k_N, k_M)`` carries the spectral coefficients
 ``a = ĝ ⊙ Φ_M[x, :]`` of each atom's kernel to ``N``: ``g_N = Φ_N C a``, which is normalized and
@@ -26,7 +38,8 @@ import numpy as np
 from .errors import BSFError
 from .spectrum import Spectrum
 
-__all__ = ["Frame", "build_frame", "transfer_frame", "TAU_CONVENTIONS"]
+__all__ = ["Frame", "build_frame", "transfer_frame", "adaptive_taus", "prune_frame",
+           "unique_atoms", "TAU_CONVENTIONS", "ADAPTIVE_AREA_RANGE", "ADAPTIVE_N_SCALES"]
 
 #: ``"unit_area"``: τ acts on the eigenvalues of the shape rescaled to unit area (λ · area);
 #: ``"raw"``: τ acts on the eigenvalues as they are (the paper's formula).
@@ -54,6 +67,9 @@ class Frame(eqx.Module):
             ĝ_l = exp(−τ · area · (λ_l − λ_1)) with area = Σ mass; ``"raw"`` means
             ĝ_l = exp(−τ (λ_l − λ_1)).  :attr:`effective_taus` gives the τ applied to the raw
             eigenvalues in either case.
+        columns: ``(q,)`` int index of each column in the frame as :func:`build_frame` made
+            it, after :func:`prune_frame` dropped duplicate or empty atoms; ``None`` for a
+            frame that was never pruned (column ``j`` is built column ``j``).
     """
 
     atoms: jax.Array
@@ -63,6 +79,7 @@ class Frame(eqx.Module):
     mass: jax.Array
     gammas: jax.Array | None = None
     tau_convention: str = eqx.field(static=True, default="unit_area")
+    columns: jax.Array | None = None
 
     def __check_init__(self):
         if self.tau_convention not in TAU_CONVENTIONS:
@@ -128,6 +145,63 @@ def _transfer_core(C: jax.Array, coeffs: jax.Array, evecs: jax.Array, gammas: ja
     k_n, k_m = C.shape
     coeffs_n = jnp.matmul(C, coeffs[:k_m], precision=jax.lax.Precision.HIGHEST)  # (k_N, q)
     return _binarize(evecs[:, :k_n], coeffs_n, gammas), coeffs_n
+
+
+#: Default area-share range ``(lo, hi)`` of the atoms chosen by ``taus="adaptive"``.
+ADAPTIVE_AREA_RANGE = (0.01, 0.20)
+#: Default number of scales of ``taus="adaptive"``.
+ADAPTIVE_N_SCALES = 6
+_TAU_GRID = 32  # τ values probed by adaptive_taus
+_N_PROBES = 64  # centres probed by adaptive_taus
+_FLOOR_MARGIN = 1.25  # smallest chosen share ≥ this × the band-limit floor
+
+
+@functools.partial(jax.jit, static_argnames=("n_scales", "unit_area"))
+def _adaptive_core(evals, evecs, mass, probes, gamma, lo, hi, n_scales: int, unit_area: bool):
+    """τ (in the frame's convention) whose mean atom area share follows a geometric series."""
+    dt = evecs.dtype
+    area = jnp.sum(mass)
+    # flat-surface heat kernel exp(−d²/4t) (t = τ · area): [ĝ ≥ γ] is a disc of area
+    # 4π t ln(1/γ), i.e. share 4π τ ln(1/γ) — only used to place the probe grid
+    tau_of_share = 1.0 / (4.0 * jnp.pi * jnp.log(1.0 / gamma))
+    grid = tau_of_share * jnp.exp(jnp.linspace(jnp.log(lo / 30.0), jnp.log(hi * 3.0),
+                                               _TAU_GRID, dtype=dt))
+    grid = grid if unit_area else grid * area
+    atoms, _ = _build_core(evals, evecs, mass, probes, grid,
+                           jnp.full((_TAU_GRID,), gamma, dt), unit_area)
+    share = jnp.mean((mass @ atoms).reshape(_TAU_GRID, -1), axis=1) / area
+    share = jax.lax.cummax(share)  # larger τ never shrinks the mean atom
+    lo_eff = jnp.maximum(lo, _FLOOR_MARGIN * share[0])  # the band limit's smallest atoms
+    hi_eff = jnp.maximum(hi, lo_eff)
+    targets = jnp.exp(jnp.linspace(jnp.log(lo_eff), jnp.log(hi_eff), n_scales, dtype=dt))
+    # strictly increasing abscissae for the interpolation (ties from saturation)
+    xs = jnp.log(share) + 1e-9 * jnp.arange(_TAU_GRID, dtype=dt)
+    return jnp.exp(jnp.interp(jnp.log(targets), xs, jnp.log(grid)))
+
+
+def _support_hashes(present: jax.Array):
+    """Two 32-bit hashes ``Σ_i [b_i ≠ 0] r_i mod 2³²`` of every column's support (fixed
+    random ``r``); equal supports hash equally, distinct ones collide with probability 2⁻⁶⁴."""
+    n = present.shape[0]
+    r = np.random.default_rng(0x5EED).integers(0, 2**32, size=(2, n), dtype=np.uint32)
+    zero = jnp.zeros((), jnp.uint32)
+    return tuple(jnp.sum(jnp.where(present, jnp.asarray(ri)[:, None], zero), axis=0,
+                         dtype=jnp.uint32) for ri in r)
+
+
+@jax.jit
+def _unique_core(atoms: jax.Array):
+    q = atoms.shape[1]
+    present = atoms != 0
+    h1, h2 = _support_hashes(present)
+    idx = jnp.arange(q)
+    order = jnp.lexsort((idx, h2, h1))  # by hash, ties by column index
+    s1, s2 = h1[order], h2[order]
+    new_run = jnp.concatenate([jnp.ones(1, bool), (s1[1:] != s1[:-1]) | (s2[1:] != s2[:-1])])
+    start = jax.lax.cummax(jnp.where(new_run, jnp.arange(q), 0))
+    rep = jnp.zeros(q, order.dtype).at[order].set(order[start])  # first column of its run
+    nonempty = jnp.any(present, axis=0)
+    return (rep == idx) & nonempty, jnp.where(nonempty, rep, -1).astype(jnp.int32)
 
 
 # --------------------------------------------------------------------------- validation
@@ -205,7 +279,7 @@ def _check_gammas(gamma, n_scales: int) -> np.ndarray:
 
 
 def build_frame(spectrum: Spectrum, centers, taus=(1e-3, 5e-3, 1e-2), gamma=0.75,
-                tau_convention: str = "unit_area") -> Frame:
+                tau_convention: str = "unit_area", *, prune: bool = False) -> Frame:
     """The Binary Sparse Frame of paper Algorithm 1, every centre and scale in one jitted call.
 
     For each scale ``τ_s`` and centre ``x_c`` (column ``j = s · n_centers + c``)::
@@ -224,9 +298,15 @@ def build_frame(spectrum: Spectrum, centers, taus=(1e-3, 5e-3, 1e-2), gamma=0.75
         spectrum: eigenpairs of the shape (:func:`bsfjax.spectrum`, or
             :func:`bsfjax.interval_spectrum` in 1D); all ``k`` of them are used.
         centers: ``(n_centers,)`` int vertex indices (e.g. :func:`farthest_point_sampling`).
-        taus: one τ > 0 or a sequence of ``S`` of them.
-        gamma: threshold in ``(0, 1)``, one for all scales or one per τ.
+        taus: one τ > 0, a sequence of ``S`` of them (any ``S ≥ 1``), or ``"adaptive"``:
+            the :data:`ADAPTIVE_N_SCALES` scales of :func:`adaptive_taus` (mean atom area
+            shares from 1 % to 20 % of the surface at this spectrum's ``k``).
+        gamma: threshold in ``(0, 1)``, one for all scales or one per τ (one value for
+            ``"adaptive"``).
         tau_convention: ``"unit_area"`` (default) or ``"raw"``; see above.
+        prune: drop empty and duplicate atoms (:func:`prune_frame`; ``Frame.columns`` then
+            says which built columns remain).  Needs concrete (non-traced) inputs.  Default
+            ``False``: the paper's frame, every column kept.
 
     Returns:
         A :class:`Frame` with ``q = S · n_centers`` columns: atoms ``(n, q)`` and coeffs
@@ -243,18 +323,167 @@ def build_frame(spectrum: Spectrum, centers, taus=(1e-3, 5e-3, 1e-2), gamma=0.75
         raise BSFError(f"tau_convention must be one of {TAU_CONVENTIONS}, got {tau_convention!r}")
     n = int(np.shape(spectrum.evecs)[0])
     c = _check_centers(centers, n)
-    t = _check_taus(taus)
-    g = _check_gammas(gamma, t.size)
+    if not isinstance(prune, bool):
+        raise BSFError(f"prune must be a bool, got {prune!r}")
+    if isinstance(taus, str):
+        if taus != "adaptive":
+            raise BSFError(f"taus must be numbers or 'adaptive', got {taus!r}")
+        if np.size(gamma) != 1:
+            raise BSFError(f"taus='adaptive' takes one gamma for all its scales, got {gamma!r}")
+        g1 = _check_gammas(gamma, 1)
+        t = adaptive_taus(spectrum, c, gamma=float(g1[0]), tau_convention=tau_convention)
+        g = np.repeat(g1, ADAPTIVE_N_SCALES)
+    else:
+        t = _check_taus(taus)
+        g = _check_gammas(gamma, t.size)
     atoms, coeffs = _build_core(jnp.asarray(spectrum.evals), jnp.asarray(spectrum.evecs),
                                 jnp.asarray(spectrum.mass), jnp.asarray(c), jnp.asarray(t),
                                 jnp.asarray(g), tau_convention == "unit_area")
     n_c = c.shape[0]
-    return Frame(atoms=atoms, coeffs=coeffs, taus=jnp.repeat(jnp.asarray(t), n_c),
-                 centers=jnp.tile(jnp.asarray(c), t.size), mass=jnp.asarray(spectrum.mass),
-                 gammas=jnp.repeat(jnp.asarray(g), n_c), tau_convention=tau_convention)
+    n_s = int(np.shape(t)[0])
+    frame = Frame(atoms=atoms, coeffs=coeffs, taus=jnp.repeat(jnp.asarray(t), n_c),
+                  centers=jnp.tile(jnp.asarray(c), n_s), mass=jnp.asarray(spectrum.mass),
+                  gammas=jnp.repeat(jnp.asarray(g), n_c), tau_convention=tau_convention)
+    return prune_frame(frame) if prune else frame
 
 
-def transfer_frame(frame: Frame, C, target_spectrum: Spectrum) -> Frame:
+def adaptive_taus(spectrum: Spectrum, centers, *, n_scales: int = ADAPTIVE_N_SCALES,
+                  area_range=ADAPTIVE_AREA_RANGE, gamma: float = 0.75,
+                  tau_convention: str = "unit_area") -> jax.Array:
+    """Scales chosen from the spectrum: atoms whose mean area share spans ``area_range``.
+
+    With ``s(τ)`` the mean area share ``Σ_v A_v B_v / Σ A`` of the atoms of scale τ (at up to
+    64 of ``centers``, evenly spaced in their order; Algorithm 1 at this spectrum's ``k`` and
+    ``gamma``), the ``n_scales`` scales are
+
+        τ_i = s⁻¹(σ_i),   σ_i = lo' (hi'/lo')^{i/(n_scales−1)},   i = 0 … n_scales − 1,
+
+    a geometric series of shares from ``lo' = max(lo, 1.25 · s(τ_min))`` to
+    ``hi' = max(hi, lo')``.  ``s`` is tabulated on 32 geometrically spaced τ (around the
+    flat-surface value ``s ≈ 4π τ ln(1/γ)`` of the unit-area heat kernel), made monotone
+    (running maximum) and inverted by interpolation in ``log τ``.  ``s(τ_min)`` is the floor
+    the band limit sets (a k-term kernel cannot be narrower than about the reproducing kernel
+    ``Φ Φ[x]ᵀ``), so at small ``k`` the series starts higher than ``lo``.
+
+    Deterministic (no random numbers); **scale invariant**: rescaling the shape leaves the
+    shares unchanged, so the ``"unit_area"`` τ are unchanged and the ``"raw"`` τ scale with
+    the area, exactly as the atoms require.  Traceable (works under ``jit``/``vmap``).
+
+    Args:
+        spectrum: eigenpairs of the shape (all ``k`` are used, as :func:`build_frame` does).
+        centers: ``(n_centers,)`` vertex indices (the frame's centres).
+        n_scales: number of scales, ``≥ 1`` (a single scale gets the share ``lo'``).
+        area_range: ``(lo, hi)`` target shares, ``0 < lo ≤ hi < 1``.
+        gamma: the threshold the frame will use.
+        tau_convention: the convention of the returned τ (see :func:`build_frame`).
+
+    Returns:
+        ``(n_scales,)`` non-decreasing τ (equal τ where the shares saturate; the duplicate
+        atoms they give are what :func:`prune_frame` removes).
+    """
+    _check_spectrum(spectrum, "spectrum")
+    if tau_convention not in TAU_CONVENTIONS:
+        raise BSFError(f"tau_convention must be one of {TAU_CONVENTIONS}, got {tau_convention!r}")
+    c = _check_centers(centers, int(np.shape(spectrum.evecs)[0]))
+    if isinstance(n_scales, bool) or not isinstance(n_scales, (int, np.integer)) \
+            or n_scales < 1:
+        raise BSFError(f"n_scales must be a positive int, got {n_scales!r}")
+    rng = _as_float_vector(area_range, "area_range")
+    if rng.size != 2 or not (0 < rng[0] <= rng[1] < 1):
+        raise BSFError(f"area_range must be (lo, hi) with 0 < lo <= hi < 1, got "
+                       f"{rng.tolist()}")
+    g = float(_check_gammas(gamma, 1)[0])
+    n_c = int(np.shape(c)[0])
+    probes = jnp.asarray(c)[np.unique(np.linspace(0, n_c - 1, min(n_c, _N_PROBES))
+                                      .round().astype(int))]
+    evecs = jnp.asarray(spectrum.evecs)
+    dt = evecs.dtype
+    return _adaptive_core(jnp.asarray(spectrum.evals, dt), evecs, jnp.asarray(spectrum.mass, dt),
+                          probes, jnp.asarray(g, dt), jnp.asarray(rng[0], dt),
+                          jnp.asarray(rng[1], dt), int(n_scales), tau_convention == "unit_area")
+
+
+def unique_atoms(frame) -> tuple[jax.Array, jax.Array]:
+    """Which columns of a frame are distinct and non-empty (traceable).
+
+    Two columns are duplicates when their supports ``{v : B_v ≠ 0}`` are equal (for binary
+    atoms: equal columns); a column is empty when its support is.  Found from two 32-bit hashes
+    of each support, one sort and a comparison of neighbours — ``O(n q + q log q)``, no
+    ``q × q`` Gram matrix.  (Distinct supports collide with probability about ``q² / 2⁶⁴``;
+    :func:`prune_frame` verifies every match exactly.)
+
+    Args:
+        frame: a :class:`Frame` or an ``(n, q)`` atom array.
+
+    Returns:
+        ``(keep, representative)``: ``keep`` ``(q,)`` bool, true for the first column of every
+        distinct non-empty support; ``representative`` ``(q,)`` int32, the kept column equal to
+        each column (itself when kept), ``-1`` for empty columns.  Masking, ``B * keep``, gives
+        a frame with the same span in which no two non-zero columns are equal.
+    """
+    atoms = frame.atoms if isinstance(frame, Frame) else frame
+    if not hasattr(atoms, "ndim"):
+        atoms = np.asarray(atoms)
+    if atoms.ndim != 2:
+        raise BSFError(f"frame atoms must have shape (n, q), got {tuple(np.shape(atoms))}")
+    return _unique_core(jnp.asarray(atoms))
+
+
+def prune_frame(frame: Frame, alpha=None):
+    """Drop empty and duplicate atoms, keeping the first of each set of equal columns.
+
+    ``Frame.columns`` of the result gives, for every remaining column, its index in the frame
+    as built (composed with an earlier pruning).  Pruning changes nothing that the frame can
+    represent: the span of the atoms is the same.
+
+    With ``alpha`` (``(..., q)`` codes in ``frame``, e.g. found on a source frame and decoded on
+    its transfer), also return the merged codes ``α'`` ``(..., q')``: the coefficients of equal
+    columns are summed onto the kept one and those of empty columns dropped, so
+    ``decode(pruned, α') == decode(frame, α)`` (up to rounding).
+
+    Concrete inputs only (the column count of the result depends on the values); under
+    ``jit`` mask with :func:`unique_atoms` instead.
+
+    Returns:
+        The pruned :class:`Frame`, or ``(frame, alpha_merged)`` when ``alpha`` is given.
+    """
+    if not isinstance(frame, Frame):
+        raise BSFError(f"frame must be a bsfjax.Frame, got {type(frame).__name__}")
+    if not _concrete(frame.atoms):
+        raise BSFError("prune_frame needs concrete atoms (the number of columns it keeps "
+                       "depends on their values); under jit, mask with unique_atoms")
+    keep, rep = (np.asarray(x) for x in unique_atoms(frame))
+    B = np.asarray(frame.atoms) != 0
+    dup = np.flatnonzero((rep >= 0) & ~keep)
+    if dup.size and not np.array_equal(B[:, dup], B[:, rep[dup]]):  # hash collision (≈ never)
+        _, first, inv = np.unique(np.packbits(B, axis=0).T, axis=0, return_index=True,
+                                  return_inverse=True)
+        rep = np.where(B.any(axis=0), first[inv.reshape(-1)], -1).astype(np.int32)
+        keep = rep == np.arange(rep.size)
+    kept = np.flatnonzero(keep)
+    if kept.size == 0:
+        raise BSFError("every atom of the frame is empty: nothing to keep")
+    cols = kept if frame.columns is None else np.asarray(frame.columns)[kept]
+    out = Frame(atoms=frame.atoms[:, kept], coeffs=frame.coeffs[:, kept],
+                taus=frame.taus[kept], centers=frame.centers[kept], mass=frame.mass,
+                gammas=None if frame.gammas is None else frame.gammas[kept],
+                tau_convention=frame.tau_convention, columns=jnp.asarray(cols, jnp.int32))
+    if alpha is None:
+        return out
+    if not hasattr(alpha, "shape"):
+        alpha = np.asarray(alpha)
+    q = frame.n_atoms
+    if alpha.ndim < 1 or alpha.shape[-1] != q:
+        raise BSFError(f"alpha must have shape (..., q) with q = {q}, got {tuple(alpha.shape)}")
+    pos = np.full(q, kept.size, np.int32)  # empty columns go to a dropped extra slot
+    pos[kept] = np.arange(kept.size)
+    seg = np.where(rep >= 0, pos[np.maximum(rep, 0)], kept.size)
+    a = jnp.moveaxis(jnp.asarray(alpha), -1, 0)
+    merged = jax.ops.segment_sum(a, jnp.asarray(seg), num_segments=kept.size + 1)[:-1]
+    return out, jnp.moveaxis(merged, 0, -1)
+
+
+def transfer_frame(frame: Frame, C, target_spectrum: Spectrum, *, p2p=None) -> Frame:
     """Carry a frame from shape ``M`` to shape ``N`` through a functional map (Eq. 11–12).
 
     With ``C`` ``(k_N, k_M)`` mapping coefficient vectors on ``M`` to ``N``::
@@ -265,6 +494,16 @@ def transfer_frame(frame: Frame, C, target_spectrum: Spectrum) -> Frame:
 
     ``k_N ≠ k_M`` is fine.  A column whose transported kernel vanishes (``max |g_N| = 0``)
     becomes an all-zero atom, never NaN.
+
+    Every column is kept, in the source's order (also ``Frame.columns``), so a code ``α``
+    found on the source frame decodes on the result as it is: empty or equal atoms on ``N``
+    are harmless to :func:`bsfjax.decode`.  To remove them, ``prune_frame(result, alpha)``
+    merges the code along with the columns.
+
+    With ``p2p`` (``(n_N,)`` source vertex of every target vertex, e.g. from
+    :func:`bsfjax.fmap_to_p2p` of a refined map) the binary atoms are pulled back exactly,
+    ``B_N = B_M[p2p]``, instead of being re-binarized from ``Φ_N C a`` (the coefficients are
+    still ``C a``): with an estimated map this avoids the blur of a truncated ``C``.
 
     Args:
         frame: a frame on ``M`` with ``gammas`` (as :func:`build_frame` returns) and at least
@@ -301,6 +540,16 @@ def transfer_frame(frame: Frame, C, target_spectrum: Spectrum) -> Frame:
         raise BSFError("C contains NaN or inf")
     atoms, coeffs = _transfer_core(jnp.asarray(C), frame.coeffs, jnp.asarray(target_spectrum.evecs),
                                    frame.gammas)
+    if p2p is not None:
+        n_n, n_m = int(np.shape(target_spectrum.evecs)[0]), frame.n_vertices
+        if not hasattr(p2p, "shape"):
+            p2p = np.asarray(p2p)
+        if tuple(p2p.shape) != (n_n,) or not jnp.issubdtype(p2p.dtype, jnp.integer):
+            raise BSFError(f"p2p must be an ({n_n},) integer array (source vertex of every "
+                           f"target vertex), got {p2p.dtype}{tuple(p2p.shape)}")
+        if _concrete(p2p) and (np.min(p2p) < 0 or np.max(p2p) >= n_m):
+            raise BSFError(f"p2p must hold source vertex indices in [0, {n_m})")
+        atoms = jnp.asarray(frame.atoms)[p2p]
     return Frame(atoms=atoms, coeffs=coeffs, taus=frame.taus, centers=frame.centers,
                  mass=jnp.asarray(target_spectrum.mass), gammas=frame.gammas,
-                 tau_convention=frame.tau_convention)
+                 tau_convention=frame.tau_convention, columns=frame.columns)

@@ -92,7 +92,9 @@ def transfer_values(source: Spectrum, target: Spectrum, values, *, C=None, p2p=N
     ``mesh`` — the source :class:`~bsfjax.Mesh` — or on the spectral embedding when no mesh is
     given), the spectral projection ``"std"``, or the pull-back ``"p2p"`` (needs ``p2p``).
     ``C`` is ``(k, k)``; ``k`` defaults to its size.  Extra ``params`` go to
-    :class:`bsfjax.baselines.Params` (e.g. ``sparsity=20``).
+    :class:`bsfjax.baselines.Params` (e.g. ``sparsity=20``, ``taus="adaptive"``, or
+    ``frame_transfer="p2p"`` with ``p2p`` to pull the atoms back through the point map — the
+    robust choice with an estimated map, see ``docs/results.md``).
     """
     from .baselines import Params
 
@@ -122,7 +124,7 @@ def transfer_values(source: Spectrum, target: Spectrum, values, *, C=None, p2p=N
         pts = mesh if mesh is not None else np.asarray(source.evecs[:, 1:4])
         centers = farthest_point_sampling(pts, n_bsf, seed=seed)
     pair = PairInput(source=source.truncate(k), target=target.truncate(C.shape[0]), C=C,
-                     centers=centers)
+                     centers=centers, p2p=None if p2p is None else np.asarray(p2p))
     res = run_baseline(method, pair, f, k=k, params=Params(**params))
     out = np.asarray(res.transferred)
     return out[0] if single else out
