@@ -130,9 +130,12 @@ def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp
     W = _stiffness(f, cots, n)
     a = _mass(f, cots, dbl_area, sq, n, mass)
     A = sp.diags(a).tocsr()
-    bad = a <= 0
+    bad = ~(a > 0)  # also catches NaN
+    where = f"{mesh.name}: " if mesh.name else ""
+    if not np.isfinite(W.data).all():  # needle-thin faces: cotangents beyond float64
+        raise MeshError(f"{where}cotangent weights overflow (nearly degenerate faces); "
+                        "use laplacian(..., robust=True)")
     if bad.any():
-        where = f"{mesh.name}: " if mesh.name else ""
         raise MeshError(f"{where}{int(bad.sum())} vertices have zero mass "
                         "(unreferenced or only in zero-area faces)")
     return W, A

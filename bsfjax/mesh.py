@@ -24,6 +24,11 @@ __all__ = ["Mesh", "MeshError", "MeshReport", "load_mesh", "save_mesh", "mesh_ed
            "graph_from_edges", "mesh_report", "n_components"]
 
 
+#: Largest accepted ``|coordinate|``: squared edge lengths and doubled areas of such a mesh
+#: (up to ``(2·10¹⁵⁰)²``) stay finite in float64.
+MAX_COORDINATE = 1e150
+
+
 def _readonly(a: np.ndarray) -> np.ndarray:
     a = np.array(a, copy=True)
     a.setflags(write=False)
@@ -76,6 +81,10 @@ class Mesh:
                 f"{where}{int(bad.sum())} vertices have NaN or infinite coordinates "
                 f"(first: vertex {int(np.flatnonzero(bad)[0])})"
             )
+        big = float(np.abs(v).max())
+        if big > MAX_COORDINATE:
+            raise MeshError(f"{where}coordinates up to {big:.3g} overflow the geometry "
+                            f"(squared lengths, areas); the limit is {MAX_COORDINATE:.0e}")
         if f.ndim != 2 or f.shape[1] != 3:
             raise MeshError(f"{where}faces must have shape (m, 3), got {f.shape}")
         if f.shape[0] == 0:
@@ -323,12 +332,14 @@ def _read_off(p: Path) -> tuple[np.ndarray, np.ndarray]:
                         f"but the file has only {len(body)} data lines: truncated?)")
     if nv == 0:
         raise MeshError(f"{p}: mesh is empty (0 vertices)")
+    short = [i for i, ln in enumerate(body[:nv]) if len(ln) < 3]
+    if short:
+        raise MeshError(f"{p}: cannot read mesh (every vertex line needs 3 coordinates; "
+                        f"{len(short)} do not, first: vertex {short[0]})")
     try:
         verts = np.array([ln[:3] for ln in body[:nv]], dtype=np.float64)
     except ValueError as exc:
         raise MeshError(f"{p}: cannot read mesh (bad vertex line: {exc})") from exc
-    if verts.shape != (nv, 3):
-        raise MeshError(f"{p}: cannot read mesh (every vertex line needs 3 coordinates)")
     groups: dict[int, list] = {}
     for ln in body[nv:nv + nf]:  # faces grouped by polygon size, then triangulated per group
         try:

@@ -161,6 +161,8 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None) -> Spec
                            "be non-singular, choose another shift") from None
         except scipy.sparse.linalg.ArpackNoConvergence as exc:
             raise BSFError(f"eigensolver did not converge for k={k} ({exc})") from None
+    if not (np.isfinite(evals).all() and np.isfinite(evecs).all()):
+        raise BSFError("the eigensolver returned NaN or inf (ill-conditioned W or A)")
     order = np.argsort(evals)
     evals, evecs = evals[order], evecs[:, order]
     norms = np.sqrt(np.einsum("ij,i,ij->j", evecs, a, evecs))
@@ -235,8 +237,8 @@ def spectrum(mesh: Mesh, k: int, *, mass: str = "mixed", robust: bool = False,
     W, A = laplacian(mesh, mass=mass, robust=robust)
     result = spectrum_from_operators(W, A, k)
     if path is not None:
-        with atomic_path(path) as tmp:
-            np.savez(tmp, evals=result.evals, evecs=result.evecs, mass=result.mass,
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, evals=result.evals, evecs=result.evecs, mass=result.mass,
                      checksum=np.array(_checksum(result.evals, result.evecs, result.mass)))
     return result
 
