@@ -137,5 +137,6 @@ def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp
                         "use laplacian(..., robust=True)")
     if bad.any():
         raise MeshError(f"{where}{int(bad.sum())} vertices have zero mass "
-                        "(unreferenced or only in zero-area faces)")
+                        "(unreferenced or only in zero-area faces; bsfjax.mesh.clean_mesh "
+                        "removes them)")
     return W, A

@@ -103,7 +103,11 @@ class Mesh:
         object.__setattr__(self, "vertices", _readonly(v))
         object.__setattr__(self, "faces", _readonly(f))
         if self.vertex_ids is not None:
-            ids = np.asarray(self.vertex_ids, dtype=np.int64)
+            ids = np.asarray(self.vertex_ids)
+            if not np.issubdtype(ids.dtype, np.integer):
+                raise MeshError(f"{where}vertex_ids must be integer row indices, got dtype "
+                                f"{ids.dtype}")
+            ids = ids.astype(np.int64)
             if ids.shape != (v.shape[0],):
                 raise MeshError(f"{where}vertex_ids must have shape ({v.shape[0]},), got {ids.shape}")
             object.__setattr__(self, "vertex_ids", _readonly(ids))
@@ -458,6 +462,8 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     unreadable files, NaN/inf coordinates, out-of-range face indices and meshes without faces
     raise :class:`MeshError` naming the file.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise MeshError(f"path must be a str or os.PathLike, got {type(path).__name__}")
     p = Path(path)
     if not p.exists():
         raise MeshError(f"{p}: no such file")

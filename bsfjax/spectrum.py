@@ -211,7 +211,8 @@ def spectrum(mesh: Mesh, k: int, *, mass: str = "mixed", robust: bool = False,
     Solves ``W φ = λ A φ`` with the cotangent stiffness and lumped mass of :func:`laplacian`
     (shift-invert Lanczos; dense LAPACK for tiny meshes).  With ``cache_dir`` the result is
     stored in ``cache_dir/<sha256 of vertices, faces, k, options>.npz``, written atomically and
-    checksummed; a corrupt cache file is recomputed, never trusted.
+    checksummed; a corrupt cache file is recomputed, never trusted, and a cache that cannot be
+    written (read-only folder, full disk) only gives a warning.
 
     A mesh with ``c`` connected components has ``c`` zero eigenvalues; a warning says so.
     """
@@ -225,6 +226,8 @@ def spectrum(mesh: Mesh, k: int, *, mass: str = "mixed", robust: bool = False,
         raise BSFError(f"mass must be one of {MASS_TYPES}, got {mass!r}")
     path = None
     if cache_dir is not None:
+        if not isinstance(cache_dir, (str, os.PathLike)) or Path(cache_dir).is_file():
+            raise BSFError(f"cache_dir must be a folder path, got {cache_dir!r}")
         path = Path(cache_dir) / f"{_cache_key(mesh, k, mass, robust)}.npz"
         cached = _load_cached(path, n, k)
         if cached is not None:
@@ -237,9 +240,13 @@ def spectrum(mesh: Mesh, k: int, *, mass: str = "mixed", robust: bool = False,
     W, A = laplacian(mesh, mass=mass, robust=robust)
     result = spectrum_from_operators(W, A, k)
     if path is not None:
-        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-            np.savez(fh, evals=result.evals, evecs=result.evecs, mass=result.mass,
-                     checksum=np.array(_checksum(result.evals, result.evecs, result.mass)))
+        try:
+            with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+                np.savez(fh, evals=result.evals, evecs=result.evecs, mass=result.mass,
+                         checksum=np.array(_checksum(result.evals, result.evecs, result.mass)))
+        except OSError as exc:  # a full disk or read-only cache must not lose the result
+            warnings.warn(f"could not write spectrum cache file {path} ({exc}); continuing "
+                          "without caching it", stacklevel=2)
     return result
 
 

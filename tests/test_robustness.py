@@ -87,6 +87,10 @@ BAD_INPUTS = [
                                                           point_data={"a": np.ones(3)}),
      MeshError, r"point_data\['a'\] has 3 rows, mesh has 42 vertices"),
     ("mesh-report-not-a-mesh", lambda s: mesh_report(s.v), MeshError, r"must be a bsfjax.Mesh"),
+    ("mesh-float-vertex-ids", lambda s: bsfjax.Mesh(s.v, s.f, vertex_ids=np.zeros(42) + 0.5),
+     MeshError, r"vertex_ids must be integer row indices, got dtype float64"),
+    ("load-path-not-a-path", lambda s: bsfjax.load_mesh(None), MeshError,
+     r"path must be a str or os.PathLike, got NoneType"),
     # --- Laplacian and spectrum
     ("laplacian-zero-area-mesh", lambda s: bsfjax.laplacian(bsfjax.Mesh(np.zeros((3, 3)),
                                                                         [[0, 1, 2]])),
@@ -103,6 +107,8 @@ BAD_INPUTS = [
      BSFError, r"k must be an integer in \[1, n_vertices=42\], got 3.0"),
     ("spectrum-unknown-mass", lambda s: bsfjax.spectrum(s.mesh, 3, mass="x"),
      BSFError, r"mass must be one of"),
+    ("spectrum-cache-dir-is-a-file", lambda s: bsfjax.spectrum(s.mesh, 3, cache_dir=__file__),
+     BSFError, r"cache_dir must be a folder path, got '.*test_robustness.py'"),
     ("operators-not-symmetric", lambda s: bsfjax.spectrum_from_operators(
         np.array([[1.0, 2.0], [0.0, 1.0]]), np.ones(2), 1), BSFError, r"W must be symmetric"),
     ("operators-nan", lambda s: bsfjax.spectrum_from_operators(
@@ -278,6 +284,14 @@ def _zero_map_transfer(s):
     return tf.atoms, bsfjax.transfer(s.frame, tf, s.F)
 
 
+def _unwritable_cache(s, tmp):
+    blocker = Path(tmp) / "a_file"
+    blocker.write_text("not a folder")
+    spec = bsfjax.spectrum(s.mesh, 4, cache_dir=blocker / "cache")  # mkdir fails: OSError
+    np.testing.assert_array_equal(spec.evecs, bsfjax.spectrum(s.mesh, 4).evecs)  # not lost
+    return spec.evals, spec.evecs
+
+
 HANDLED_INPUTS = [
     ("load-zero-area-face", lambda s, tmp: _load_text(
         tmp, "deg.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n2 0 0\n3 0 1 2\n3 0 1 3\n").vertices,
@@ -310,6 +324,8 @@ HANDLED_INPUTS = [
         s.spec, s.spec, np.zeros((s.n, 3)), np.zeros((s.n, 3)), k=5), None),
     ("fps-more-samples-than-distinct-points", lambda s, tmp: bsfjax.farthest_point_sampling(
         np.zeros((5, 3)), 3), None),
+    ("spectrum-cache-not-writable", lambda s, tmp: _unwritable_cache(s, tmp),
+     r"could not write spectrum cache file .*; continuing without caching it"),
     ("frame-on-several-components", lambda s, tmp: bsfjax.build_frame(
         bsfjax.spectrum(bsfjax.Mesh(*_two_components()), 6), [0, 50]).atoms,
      r"mesh has 2 connected components"),
