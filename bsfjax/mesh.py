@@ -356,7 +356,11 @@ def _read_off(p: Path) -> tuple[np.ndarray, np.ndarray]:
         groups.setdefault(size, []).append(idx)
     tris = []
     for size, polys in groups.items():
-        arr = np.asarray(polys, dtype=np.int64)
+        try:
+            arr = np.asarray(polys, dtype=np.int64)
+        except OverflowError:
+            raise MeshError(f"{p}: face indices out of range (beyond 64-bit integers) for "
+                            f"{nv} vertices") from None
         tris.extend(arr[:, [0, j, j + 1]] for j in range(1, size - 1))
     faces = np.concatenate(tris) if tris else np.zeros((0, 3), np.int64)
     return verts, faces

@@ -113,6 +113,8 @@ READER_CASES = [
     ("nan_vertex.off", b"OFF\n3 1 0\nnan 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "NaN or infinite"),
     ("negative_index.off", b"OFF\n3 1 0\n" + _TRI + b"3 0 -1 2\n", "face indices out of range"),
     ("index_too_big.off", b"OFF\n3 1 0\n" + _TRI + b"3 0 1 7\n", "face indices out of range"),
+    ("index_beyond_int64.off", b"OFF\n3 1 0\n" + _TRI + b"3 0 1 99999999999999999999999\n",
+     "beyond 64-bit integers"),
     ("short_face.off", b"OFF\n3 1 0\n" + _TRI + b"3 0 1\n", "bad face line"),
     ("huge_polygon.off", b"OFF\n3 1 0\n" + _TRI + b"2147483647 0 1 2\n", "bad face line"),
     ("binary.off", b"OFF\n\x00\xff\xfe garbage\x81", "not an ASCII OFF file"),
