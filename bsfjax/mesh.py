@@ -48,8 +48,11 @@ class Mesh:
             correspondences) is brought onto the mesh with ``data[mesh.vertex_ids]``.
         name: where the mesh came from (a path), for error messages.
 
-    The constructor validates its input and raises :class:`MeshError` on NaN/inf coordinates,
-    wrong shapes, out-of-range or negative face indices and empty meshes.
+    The constructor validates its input and raises :class:`MeshError` on NaN/inf, complex or
+    overflowing (``|x| > MAX_COORDINATE``) coordinates, ragged or wrongly shaped arrays,
+    non-integer, out-of-range or negative face indices and empty meshes.  It does not clean:
+    degenerate faces, isolated or duplicate vertices and non-manifold edges are counted by
+    :func:`mesh_report` and removed or reported by :func:`clean_mesh` / :func:`load_mesh`.
     """
 
     vertices: np.ndarray

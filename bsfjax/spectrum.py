@@ -45,6 +45,9 @@ class Spectrum(eqx.Module):
     input always gives the same basis.  ``Spectrum`` is a pytree: pass it to jitted functions, or
     stack several of equal shapes with ``jax.tree.map(lambda *x: jnp.stack(x), *spectra)`` to
     ``vmap`` over shapes.
+
+    Constructing a ``Spectrum`` from concrete arrays checks them (:class:`bsfjax.BSFError`):
+    matching shapes, real finite values, ``mass >= 0``; traced values are not checked.
     """
 
     evals: np.ndarray
@@ -156,11 +159,11 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None) -> Spec
         try:
             evals, evecs = scipy.sparse.linalg.eigsh(W.tocsc(), k=k, M=Am.tocsc(), sigma=sigma,
                                                      which="LM", v0=v0)
+        except scipy.sparse.linalg.ArpackNoConvergence as exc:  # (a RuntimeError too)
+            raise BSFError(f"eigensolver did not converge for k={k} ({exc})") from None
         except RuntimeError as exc:  # W − σA singular: σ is an eigenvalue
             raise BSFError(f"eigensolver failed with sigma={sigma!r} ({exc}); W - sigma*A must "
                            "be non-singular, choose another shift") from None
-        except scipy.sparse.linalg.ArpackNoConvergence as exc:
-            raise BSFError(f"eigensolver did not converge for k={k} ({exc})") from None
     if not (np.isfinite(evals).all() and np.isfinite(evecs).all()):
         raise BSFError("the eigensolver returned NaN or inf (ill-conditioned W or A)")
     order = np.argsort(evals)
