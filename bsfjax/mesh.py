@@ -457,7 +457,11 @@ def _read_meshio(p: Path) -> tuple[np.ndarray, np.ndarray]:
         pts = np.concatenate([pts, np.zeros((pts.shape[0], 1))], axis=1)
     elif pts.shape[1] > 3:  # OBJ "v x y z w" or "v x y z r g b": the position comes first
         pts = pts[:, :3]
-    return pts, _triangulate(m.cells)
+    try:
+        faces = _triangulate(m.cells)
+    except (OverflowError, TypeError, ValueError) as exc:  # e.g. indices beyond int64
+        raise MeshError(f"{p}: cannot read mesh (bad face indices: {exc})") from None
+    return pts, faces
 
 
 def load_mesh(path: str | os.PathLike) -> Mesh:

@@ -142,6 +142,8 @@ READER_CASES = [
     ("negative_index.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -3\n", "out of range"),
     ("zero_index.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "out of range"),
     ("index_too_big.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "out of range"),
+    ("index_beyond_int64.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999999\n",
+     "bad face indices"),
     ("ragged_vertex.obj", b"v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n", "cannot read mesh"),
     ("text_in_vertex.obj", b"v 0 zero 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "cannot read mesh"),
     ("no_faces.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no faces"),
