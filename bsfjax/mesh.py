@@ -24,9 +24,9 @@ __all__ = ["Mesh", "MeshError", "MeshReport", "load_mesh", "save_mesh", "mesh_ed
            "graph_from_edges", "mesh_report", "n_components"]
 
 
-#: Largest accepted ``|coordinate|``: squared edge lengths and doubled areas of such a mesh
-#: (up to ``(2·10¹⁵⁰)²``) stay finite in float64.
-MAX_COORDINATE = 1e150
+#: Largest accepted ``|coordinate|``.  Face areas are norms of cross products of edges, whose
+#: squares grow as ``|x|⁴`` (up to ``192 |x|⁴``): below 10⁷⁵ they stay finite in float64.
+MAX_COORDINATE = 1e75
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
