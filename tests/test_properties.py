@@ -27,7 +27,7 @@ import bsfjax
 
 from .conftest import icosphere
 
-SETTINGS = settings(max_examples=8, deadline=None, database=None,
+SETTINGS = settings(max_examples=6, deadline=None, database=None,
                     suppress_health_check=[HealthCheck.too_slow,
                                            HealthCheck.function_scoped_fixture])
 K = 12
