@@ -298,10 +298,12 @@ def _cmd_spectrum(args) -> int:
     from .mesh import load_mesh
     from .spectrum import spectrum
 
+    if Path(args.out).suffix != ".npz":
+        raise CLIError(f"--out {args.out}: use a .npz file name")
     mesh = load_mesh(args.mesh)
     spec = spectrum(mesh, args.k)
-    with atomic_path(args.out) as tmp:
-        np.savez(tmp, evals=spec.evals, evecs=spec.evecs, mass=spec.mass)
+    with atomic_path(args.out) as tmp, open(tmp, "wb") as fh:  # a handle: savez adds no suffix
+        np.savez(fh, evals=spec.evals, evecs=spec.evecs, mass=spec.mass)
     print(f"{args.mesh}: {mesh.n_vertices} vertices, k={args.k}, "
           f"lambda_2={spec.evals[1] if spec.k > 1 else 0:.6g}, wrote {args.out}")
     return 0

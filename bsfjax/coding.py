@@ -42,6 +42,7 @@ with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintaine
     from jaxopt import ProximalGradient
     from jaxopt.prox import prox_lasso
 
+from ._validate import check_finite, magnitude_limit
 from .errors import BSFError
 from .frame import Frame
 
@@ -255,6 +256,24 @@ def _check_functions(f, n, name="f"):
     return f
 
 
+def _check_magnitude(f, w, n, dtype):
+    """Reject functions so large that ``Σ w f²`` or ``(Bᵀf)²`` overflow ``dtype`` (NaN codes)."""
+    if _is_traced(f) or (w is not None and _is_traced(w)):
+        return
+    arr = np.asarray(f)
+    if arr.size == 0:
+        return
+    big = float(np.max(np.abs(arr)))
+    if w is not None:
+        big *= math.sqrt(float(np.max(np.asarray(w))))
+    limit = magnitude_limit(n, dtype)
+    if big > limit:
+        raise BSFError(f"f has values up to {big:.3g} (times sqrt(weight)), too large for "
+                       f"{np.dtype(dtype).name} arithmetic on n = {n} vertices (limit "
+                       f"{limit:.3g}): rescale f (codes are linear in f) or enable "
+                       "jax_enable_x64")
+
+
 # ----------------------------------------------------------------------------------------------
 # Public API
 # ----------------------------------------------------------------------------------------------
@@ -338,6 +357,7 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
     if not isinstance(return_info, bool):
         raise BSFError(f"return_info must be a bool, got {return_info!r}")
     dtype = _float_dtype(f, atoms)
+    _check_magnitude(f, w, n, dtype)
     m = int(np.prod(lead, dtype=np.int64))
     F = jnp.reshape(jnp.asarray(f, dtype), (m, n))
     B = jnp.asarray(atoms, dtype)
@@ -378,6 +398,7 @@ def decode(frame, alpha) -> jax.Array:
     if alpha.ndim < 1 or alpha.shape[-1] != q:
         raise BSFError(f"alpha must have shape (..., q) with q = {q} atoms, got "
                        f"{tuple(alpha.shape)}")
+    check_finite(alpha, "alpha")
     dtype = _float_dtype(alpha, atoms)
     return _decode(jnp.asarray(atoms, dtype), jnp.asarray(alpha, dtype))
 

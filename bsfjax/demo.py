@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from ._files import write_text_atomic
+from ._validate import check_int
+from .errors import BSFError
 
 __all__ = ["run_demo", "format_table", "example_landmarks"]
 
@@ -89,9 +91,17 @@ def run_demo(out_dir: str | Path | None = "bsfjax-demo", *, levels: int = 3, k: 
     from .sampling import farthest_point_sampling
     from .spectrum import spectrum
 
+    # every argument is checked before the first (slow) stage runs
+    check_int(k, "k", 2)
+    check_int(k_refine, "k_refine", k)
+    check_int(n_functions, "n_functions", 1)
+    check_int(seed, "seed", 0)
     timer = _Timer(progress)
     t_all = time.perf_counter()
     pair = timer("example pair", example_pair, levels)
+    if k_refine >= pair.source.n_vertices:
+        raise BSFError(f"k_refine must be below the {pair.source.n_vertices} vertices of the "
+                       f"example pair at levels={levels}, got {k_refine}")
     src, tgt = pair.source, pair.target
     n = src.n_vertices
     k_max = max(k, k_refine)

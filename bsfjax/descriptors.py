@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._validate import check_real
 from .errors import BSFError
 from .spectrum import Spectrum
 
@@ -61,6 +62,17 @@ def _check(spectrum, name="spectrum") -> tuple[int, int, tuple[int, ...]]:
     if k < 2:
         raise BSFError(f"{name} needs at least 2 eigenpairs for automatic scales, got k={k}")
     return n, k, tuple(batch)
+
+
+def _check_nonzero(spectrum, k: int, what: str) -> None:
+    """Automatic scales (and every WKS weight) need a non-zero eigenvalue besides λ₁."""
+    ev = np.abs(np.asarray(spectrum.evals)[..., :k], dtype=np.float64)
+    top = ev.max(axis=-1, keepdims=True)
+    ok = np.any((ev > ZERO_EIG_RTOL * top) & (top > 0), axis=-1)
+    if not np.all(ok):
+        raise BSFError(f"{what} needs a non-zero eigenvalue among the first k={k}, but "
+                       f"{int(np.size(ok) - np.count_nonzero(ok))} spectrum(s) have only zero "
+                       "eigenvalues (a constant basis): use a larger k")
 
 
 def _check_count(value, name: str) -> int:
@@ -95,8 +107,15 @@ def _check_k(k, k_avail: int) -> int:
     return int(k)
 
 
+def _as_floats(values, name: str) -> np.ndarray:
+    try:
+        return np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise BSFError(f"{name} must be numbers, got {values!r}") from None
+
+
 def _scales(values, name: str, batch: tuple[int, ...]) -> np.ndarray:
-    arr = np.asarray(values, dtype=np.float64)
+    arr = _as_floats(values, name)
     if arr.ndim == 0:
         arr = arr[None]
     if arr.shape[-1] == 0 or not np.all(np.isfinite(arr)):
@@ -154,8 +173,9 @@ def _signature(weights, evecs, landmarks, scaled: bool):
     weights: (..., S, k); evecs: (..., n, k); landmarks: None, (p,) or (..., p).
     Returns (..., n, S) or (..., n, p·S) landmark-major.
     """
-    if scaled:
-        weights = weights / jnp.sum(weights, axis=-1, keepdims=True)
+    if scaled:  # a column whose weights all underflow to 0 stays 0 (not 0/0 = NaN)
+        total = jnp.sum(weights, axis=-1, keepdims=True)
+        weights = weights / jnp.where(total > 0, total, 1.0)
     if landmarks is None:
         return jnp.einsum("...sk,...nk->...ns", weights, evecs * evecs)
     if landmarks.ndim == 1:
@@ -219,6 +239,7 @@ def hks(spectrum: Spectrum, n_times: int = 100, *, times=None, landmarks=None, k
     k = _check_k(k, k_avail)
     lm = _check_landmarks(landmarks, n, batch)
     if times is None:
+        _check_nonzero(spectrum, k, "hks with automatic times")
         n_times = _check_count(n_times, "n_times")
     else:
         times = _scales(times, "times", batch)
@@ -254,8 +275,8 @@ def wks(spectrum: Spectrum, n_energies: int = 100, *, energies=None, sigma=None,
     n, k_avail, batch = _check(spectrum)
     k = _check_k(k, k_avail)
     lm = _check_landmarks(landmarks, n, batch)
-    if not np.isfinite(variance) or variance <= 0:
-        raise BSFError(f"variance must be positive and finite, got {variance!r}")
+    variance = check_real(variance, "variance", positive=True)
+    _check_nonzero(spectrum, k, "wks")
     if energies is None:
         n_energies = _check_count(n_energies, "n_energies")
     else:
@@ -264,7 +285,7 @@ def wks(spectrum: Spectrum, n_energies: int = 100, *, energies=None, sigma=None,
         if sigma is None:
             raise BSFError("sigma must be given together with explicit energies")
     if sigma is not None:
-        sig = np.asarray(sigma, dtype=np.float64)
+        sig = _as_floats(sigma, "sigma")
         if not np.all(np.isfinite(sig)) or np.any(sig <= 0):
             raise BSFError(f"sigma must be positive and finite, got {sigma!r}")
         if sig.ndim > 0 and sig.shape != batch:

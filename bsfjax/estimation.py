@@ -67,6 +67,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
+from ._validate import check_finite
 from .errors import BSFError
 from .mesh import Mesh
 from .spectrum import Spectrum
@@ -540,6 +541,7 @@ def fmap_energy(C, source_spectrum: Spectrum, target_spectrum: Spectrum, source_
     shape = np.shape(C)
     if len(shape) != 2:
         raise BSFError(f"C must be a (k_target, k_source) matrix, got shape {shape}")
+    check_finite(C, "C")
     batched, km, kn, dm, dn = _prepare(source_spectrum, target_spectrum, source_descr,
                                        target_descr, (shape[1], shape[0]))
     if batched:

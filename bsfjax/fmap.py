@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from ._validate import check_finite
 from .errors import BSFError
 from .spectrum import Spectrum
 
@@ -86,6 +87,7 @@ def _check_fmap(C, k_source: int, k_target: int, name: str = "C") -> tuple[int, 
                        f"k_target={k_target}, k_source={k_source} eigenpairs")
     if km < 1 or kn < 1:
         raise BSFError(f"{name} must be non-empty, got shape {shape}")
+    check_finite(C, name)
     return kn, km
 
 
@@ -185,6 +187,8 @@ def nearest_neighbors(reference, queries, *, chunk_size: int | None = None) -> j
     if ref.ndim != 2 or qry.ndim != 2 or ref.shape[1] != qry.shape[1]:
         raise BSFError(f"reference (n_r, d) and queries (n_q, d) must be 2-D with the same d, got "
                        f"{ref.shape} and {qry.shape}")
+    check_finite(ref, "reference")
+    check_finite(qry, "queries")
     if ref.shape[0] == 0:
         raise BSFError("reference must have at least one row")
     if qry.shape[0] == 0:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import MeshError
+from .errors import BSFError, MeshError
 from .mesh import Mesh
 
 __all__ = ["laplacian", "cotangent_stiffness", "mass_matrix"]
@@ -87,7 +87,7 @@ def mass_matrix(mesh: Mesh, kind: str = "mixed") -> sp.csr_matrix:
     total surface area.
     """
     if kind not in MASS_TYPES:
-        raise ValueError(f"mass must be one of {MASS_TYPES}, got {kind!r}")
+        raise BSFError(f"mass must be one of {MASS_TYPES}, got {kind!r}")
     cots, dbl_area, sq = _corner_geometry(mesh.vertices, mesh.faces)
     return sp.diags(_mass(mesh.faces, cots, dbl_area, sq, mesh.n_vertices, kind)).tocsr()
 
@@ -108,7 +108,7 @@ def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp
         ``(W, A)``: ``W`` symmetric PSD with ``W·1 = 0``; ``A`` diagonal with positive entries.
     """
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
+        raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
     if robust:
         try:
             import robust_laplacian
@@ -116,17 +116,27 @@ def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp
             raise ImportError("robust=True needs the robust-laplacian package: "
                               "pip install 'bsfjax[robust]'") from exc
         W, A = robust_laplacian.mesh_laplacian(np.asarray(mesh.vertices), np.asarray(mesh.faces))
-        return sp.csr_matrix(W), sp.csr_matrix(A)
+        W, A = sp.csr_matrix(W), sp.csr_matrix(A)
+        a = A.diagonal()
+        if not (np.isfinite(W.data).all() and np.isfinite(a).all()) or np.any(a <= 0):
+            where = f"{mesh.name}: " if mesh.name else ""
+            raise MeshError(f"{where}robust Laplacian has {int(np.sum(~(a > 0)))} vertices with "
+                            "zero or undefined mass (unreferenced or only in zero-area faces)")
+        return W, A
     if mass not in MASS_TYPES:
-        raise ValueError(f"mass must be one of {MASS_TYPES}, got {mass!r}")
+        raise BSFError(f"mass must be one of {MASS_TYPES}, got {mass!r}")
     v, f, n = mesh.vertices, mesh.faces, mesh.n_vertices
     cots, dbl_area, sq = _corner_geometry(v, f)  # shared by W and A
     W = _stiffness(f, cots, n)
     a = _mass(f, cots, dbl_area, sq, n, mass)
     A = sp.diags(a).tocsr()
-    bad = a <= 0
+    bad = ~(a > 0)  # also catches NaN
+    where = f"{mesh.name}: " if mesh.name else ""
+    if not np.isfinite(W.data).all():  # needle-thin faces: cotangents beyond float64
+        raise MeshError(f"{where}cotangent weights overflow (nearly degenerate faces); "
+                        "use laplacian(..., robust=True)")
     if bad.any():
-        where = f"{mesh.name}: " if mesh.name else ""
         raise MeshError(f"{where}{int(bad.sum())} vertices have zero mass "
-                        "(unreferenced or only in zero-area faces)")
+                        "(unreferenced or only in zero-area faces; bsfjax.mesh.clean_mesh "
+                        "removes them)")
     return W, A

@@ -8,16 +8,25 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import warnings
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.csgraph
 
 from ._files import atomic_path
 from .errors import MeshError
 
-__all__ = ["Mesh", "MeshError", "load_mesh", "save_mesh", "mesh_edges", "edge_graph", "graph_from_edges"]
+__all__ = ["Mesh", "MeshError", "MeshReport", "load_mesh", "save_mesh", "mesh_edges", "edge_graph",
+           "graph_from_edges", "mesh_report", "n_components"]
+
+
+#: Largest accepted ``|coordinate|``.  Face areas are norms of cross products of edges, whose
+#: squares grow as ``|x|⁴`` (up to ``192 |x|⁴``): below 10⁷⁵ they stay finite in float64.
+MAX_COORDINATE = 1e75
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -39,8 +48,11 @@ class Mesh:
             correspondences) is brought onto the mesh with ``data[mesh.vertex_ids]``.
         name: where the mesh came from (a path), for error messages.
 
-    The constructor validates its input and raises :class:`MeshError` on NaN/inf coordinates,
-    wrong shapes, out-of-range or negative face indices and empty meshes.
+    The constructor validates its input and raises :class:`MeshError` on NaN/inf, complex or
+    overflowing (``|x| > MAX_COORDINATE``) coordinates, ragged or wrongly shaped arrays,
+    non-integer, out-of-range or negative face indices and empty meshes.  It does not clean:
+    degenerate faces, isolated or duplicate vertices and non-manifold edges are counted by
+    :func:`mesh_report` and removed or reported by :func:`clean_mesh` / :func:`load_mesh`.
     """
 
     vertices: np.ndarray
@@ -50,14 +62,21 @@ class Mesh:
 
     def __post_init__(self):
         where = f"{self.name}: " if self.name else ""
-        v = np.asarray(self.vertices)
-        f = np.asarray(self.faces)
+        try:
+            v = np.asarray(self.vertices)
+        except (TypeError, ValueError) as exc:  # ragged nested lists, objects numpy rejects
+            raise MeshError(f"{where}vertices must be an (n, 3) array of numbers ({exc})") from None
+        try:
+            f = np.asarray(self.faces)
+        except (TypeError, ValueError) as exc:
+            raise MeshError(f"{where}faces must be an (m, 3) array of vertex indices ({exc})") \
+                from None
         if v.ndim != 2 or v.shape[1] != 3:
             raise MeshError(f"{where}vertices must have shape (n, 3), got {v.shape}")
         if v.shape[0] == 0:
             raise MeshError(f"{where}mesh is empty (0 vertices)")
-        if not np.issubdtype(v.dtype, np.number):
-            raise MeshError(f"{where}vertices must be numeric, got dtype {v.dtype}")
+        if not np.issubdtype(v.dtype, np.number) or np.issubdtype(v.dtype, np.complexfloating):
+            raise MeshError(f"{where}vertices must be real numbers, got dtype {v.dtype}")
         v = v.astype(np.float64)
         bad = ~np.isfinite(v).all(axis=1)
         if bad.any():
@@ -65,6 +84,10 @@ class Mesh:
                 f"{where}{int(bad.sum())} vertices have NaN or infinite coordinates "
                 f"(first: vertex {int(np.flatnonzero(bad)[0])})"
             )
+        big = float(np.abs(v).max())
+        if big > MAX_COORDINATE:
+            raise MeshError(f"{where}coordinates up to {big:.3g} overflow the geometry "
+                            f"(squared lengths, areas); the limit is {MAX_COORDINATE:.0e}")
         if f.ndim != 2 or f.shape[1] != 3:
             raise MeshError(f"{where}faces must have shape (m, 3), got {f.shape}")
         if f.shape[0] == 0:
@@ -83,7 +106,11 @@ class Mesh:
         object.__setattr__(self, "vertices", _readonly(v))
         object.__setattr__(self, "faces", _readonly(f))
         if self.vertex_ids is not None:
-            ids = np.asarray(self.vertex_ids, dtype=np.int64)
+            ids = np.asarray(self.vertex_ids)
+            if not np.issubdtype(ids.dtype, np.integer):
+                raise MeshError(f"{where}vertex_ids must be integer row indices, got dtype "
+                                f"{ids.dtype}")
+            ids = ids.astype(np.int64)
             if ids.shape != (v.shape[0],):
                 raise MeshError(f"{where}vertex_ids must have shape ({v.shape[0]},), got {ids.shape}")
             object.__setattr__(self, "vertex_ids", _readonly(ids))
@@ -116,9 +143,16 @@ class Mesh:
 def mesh_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unique undirected edges ``(e, 2)`` (sorted pairs, lexicographic order) and, per face,
     the index of its edges ``(m, 3)`` in the order (v0v1, v1v2, v2v0)."""
-    faces = np.asarray(faces)
+    faces = np.asarray(faces, dtype=np.int64)
+    if faces.size == 0:
+        return np.zeros((0, 2), np.int64), np.zeros((0, 3), np.int64)
     half = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    edges, inv = np.unique(np.sort(half, axis=1), axis=0, return_inverse=True)
+    lo, hi = half.min(axis=1), half.max(axis=1)
+    # one int64 key per sorted pair (lo·n + hi sorts like the pair): a 1-D unique is several
+    # times faster than np.unique(..., axis=0) on rows
+    n = int(hi.max()) + 1
+    keys, inv = np.unique(lo * n + hi, return_inverse=True)
+    edges = np.stack([keys // n, keys % n], axis=1)
     return edges, inv.reshape(3, -1).T
 
 
@@ -141,6 +175,85 @@ def edge_graph(mesh: "Mesh") -> sp.csr_matrix:
     return graph_from_edges(mesh.n_vertices, e, lengths)
 
 
+class MeshReport(NamedTuple):
+    """What :func:`mesh_report` counts on a mesh (every field an ``int``).
+
+    Attributes:
+        n_vertices, n_faces: sizes.
+        degenerate_faces: faces with a repeated vertex index or zero area.
+        duplicate_faces: faces whose vertex set equals that of an earlier face.
+        duplicate_vertices: vertices with exactly the coordinates of an earlier vertex.
+        isolated_vertices: vertices that no face references.
+        non_manifold_edges: edges shared by more than two faces.
+        boundary_edges: edges of a single face.
+        components: connected components of the face graph (isolated vertices count as
+            components of their own).
+    """
+
+    n_vertices: int
+    n_faces: int
+    degenerate_faces: int
+    duplicate_faces: int
+    duplicate_vertices: int
+    isolated_vertices: int
+    non_manifold_edges: int
+    boundary_edges: int
+    components: int
+
+
+def n_components(mesh: "Mesh", edges: np.ndarray | None = None) -> int:
+    """Connected components of the mesh's edge graph (an isolated vertex is one of its own);
+    ``edges`` from :func:`mesh_edges` if already at hand."""
+    e = mesh_edges(mesh.faces)[0] if edges is None else edges
+    g = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(mesh.n_vertices,) * 2)
+    return int(scipy.sparse.csgraph.connected_components(g, directed=False)[0])
+
+
+def _row_keys(a: np.ndarray) -> np.ndarray:
+    """One opaque scalar per row (equal rows ⇔ equal keys), for fast 1-D ``np.unique``."""
+    a = np.ascontiguousarray(a)
+    return a.view(np.dtype((np.void, a.dtype.itemsize * a.shape[1]))).ravel()
+
+
+def mesh_report(mesh: "Mesh") -> MeshReport:
+    """Count the defects of ``mesh`` that the pipeline handles but a user should know about.
+
+    ``load_mesh`` removes degenerate faces and isolated vertices and warns about duplicate
+    vertices and non-manifold edges; :func:`bsfjax.spectrum` warns about several components.
+    Cost: a few sorts of the ``(m, 3)`` faces and ``(n, 3)`` vertices.
+    """
+    if not isinstance(mesh, Mesh):
+        raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
+    f = mesh.faces
+    repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
+    degenerate = int(np.sum(repeated | (mesh.face_areas() == 0)))
+    dup_faces = f.shape[0] - np.unique(_row_keys(np.sort(f, axis=1))).shape[0]
+    dup_verts = mesh.n_vertices - np.unique(_row_keys(mesh.vertices + 0.0)).shape[0]  # −0 → +0
+    used = np.zeros(mesh.n_vertices, dtype=bool)
+    used[f.ravel()] = True
+    edges, face_edges = mesh_edges(f)
+    per_edge = np.bincount(face_edges.ravel(), minlength=len(edges))
+    return MeshReport(
+        n_vertices=mesh.n_vertices, n_faces=mesh.n_faces, degenerate_faces=degenerate,
+        duplicate_faces=int(dup_faces), duplicate_vertices=int(dup_verts),
+        isolated_vertices=int((~used).sum()), non_manifold_edges=int(np.sum(per_edge > 2)),
+        boundary_edges=int(np.sum(per_edge == 1)), components=n_components(mesh, edges))
+
+
+def _warn_defects(mesh: "Mesh", stacklevel: int) -> None:
+    """Warn (with counts) about the kept defects: duplicate vertices, non-manifold edges."""
+    where = f"{mesh.name}: " if mesh.name else ""
+    rep = mesh_report(mesh)
+    if rep.duplicate_vertices:
+        warnings.warn(f"{where}{rep.duplicate_vertices} duplicate vertices (same coordinates as "
+                      "another vertex; kept: faces on either copy are not connected there)",
+                      stacklevel=stacklevel + 1)
+    if rep.non_manifold_edges:
+        warnings.warn(f"{where}{rep.non_manifold_edges} non-manifold edges (shared by more than "
+                      "two faces; kept: the cotangent Laplacian sums every face, "
+                      "laplacian(..., robust=True) is better suited)", stacklevel=stacklevel + 1)
+
+
 def _triangulate(cells) -> np.ndarray:
     """Fan-triangulate every polygon cell block (triangles pass through unchanged)."""
     tris = []
@@ -161,6 +274,9 @@ def _triangulate(cells) -> np.ndarray:
 def clean_mesh(vertices: np.ndarray, faces: np.ndarray, name: str | None = None,
                area_tol: float = 0.0) -> Mesh:
     """Build a :class:`Mesh`, dropping zero-area faces and unreferenced vertices with a warning.
+
+    Duplicate vertices and non-manifold edges are kept, with a warning that counts them
+    (see :func:`mesh_report`).
 
     A face is degenerate when two of its indices coincide or its area is ``<= area_tol`` times the
     mean face area.  Vertices no face references are removed; ``Mesh.vertex_ids`` records the
@@ -186,8 +302,11 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, name: str | None = None,
             stacklevel=3,
         )
         remap = np.cumsum(used) - 1
-        return Mesh(v[used], remap[f], vertex_ids=np.flatnonzero(used), name=name)
-    return Mesh(v, f, name=name)
+        mesh = Mesh(v[used], remap[f], vertex_ids=np.flatnonzero(used), name=name)
+    else:
+        mesh = Mesh(v, f, name=name)
+    _warn_defects(mesh, stacklevel=3)
+    return mesh
 
 
 def _read_off(p: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -220,12 +339,14 @@ def _read_off(p: Path) -> tuple[np.ndarray, np.ndarray]:
                         f"but the file has only {len(body)} data lines: truncated?)")
     if nv == 0:
         raise MeshError(f"{p}: mesh is empty (0 vertices)")
+    short = [i for i, ln in enumerate(body[:nv]) if len(ln) < 3]
+    if short:
+        raise MeshError(f"{p}: cannot read mesh (every vertex line needs 3 coordinates; "
+                        f"{len(short)} do not, first: vertex {short[0]})")
     try:
         verts = np.array([ln[:3] for ln in body[:nv]], dtype=np.float64)
     except ValueError as exc:
         raise MeshError(f"{p}: cannot read mesh (bad vertex line: {exc})") from exc
-    if verts.shape != (nv, 3):
-        raise MeshError(f"{p}: cannot read mesh (every vertex line needs 3 coordinates)")
     groups: dict[int, list] = {}
     for ln in body[nv:nv + nf]:  # faces grouped by polygon size, then triangulated per group
         try:
@@ -238,7 +359,11 @@ def _read_off(p: Path) -> tuple[np.ndarray, np.ndarray]:
         groups.setdefault(size, []).append(idx)
     tris = []
     for size, polys in groups.items():
-        arr = np.asarray(polys, dtype=np.int64)
+        try:
+            arr = np.asarray(polys, dtype=np.int64)
+        except OverflowError:
+            raise MeshError(f"{p}: face indices out of range (beyond 64-bit integers) for "
+                            f"{nv} vertices") from None
         tris.extend(arr[:, [0, j, j + 1]] for j in range(1, size - 1))
     faces = np.concatenate(tris) if tris else np.zeros((0, 3), np.int64)
     return verts, faces
@@ -252,40 +377,55 @@ _PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort"
 def _check_ply(p: Path) -> None:
     """Reject PLY files whose header is unterminated or whose counts exceed the file.
 
-    meshio's PLY reader loops forever on a header without ``end_header`` and allocates whatever
-    a header declares, so the header is checked first against the bytes actually present.
+    meshio's PLY reader loops forever on a header without an ``end_header`` line and
+    allocates whatever a header declares, so the header is parsed here first, line by line as
+    meshio reads it (lines split at ``\\n``, stripped, ``comment`` lines skipped), and its
+    element counts are checked against the bytes actually present.
     """
     size = p.stat().st_size
     with open(p, "rb") as fh:
         head = fh.read(1 << 20)
-    end = head.find(b"end_header")
-    if not head.startswith(b"ply") or end < 0:
-        raise MeshError(f"{p}: cannot read mesh (PLY header missing or not terminated by end_header)")
-    body = size - (head.find(b"\n", end) + 1)
-    fmt, min_bytes, lines_needed, current = "ascii", 0, 0, None
-    for line in head[:end].decode("ascii", "replace").splitlines():
-        tok = line.split()
-        if not tok:
+    lines, offset, ended = [], 0, False
+    while offset < len(head):
+        nl = head.find(b"\n", offset)
+        if nl < 0:
+            break  # a header line must end with a newline (meshio reads to EOF otherwise)
+        try:
+            line = head[offset:nl].decode().strip()
+        except UnicodeDecodeError:
+            raise MeshError(f"{p}: cannot read mesh (PLY header is not text)") from None
+        offset = nl + 1
+        if line == "end_header":
+            ended = True
+            break
+        lines.append(line)
+    if not lines or lines[0] != "ply" or not ended:
+        raise MeshError(f"{p}: cannot read mesh (PLY header missing or not terminated by an "
+                        "end_header line)")
+    body = size - offset
+    fmt, min_bytes, rows_needed, current = "ascii", 0, 0, None
+    for line in lines[1:]:
+        if not line or line.startswith("comment"):
             continue
+        tok = line.split()
         if tok[0] == "format" and len(tok) > 1:
             fmt = tok[1]
-        elif tok[0] == "element" and len(tok) == 3:
-            try:
-                current = int(tok[2])
-            except ValueError:
-                raise MeshError(f"{p}: cannot read mesh (bad PLY element line {line!r})") from None
-            if current < 0:
-                raise MeshError(f"{p}: cannot read mesh (negative PLY element count {current})")
-            lines_needed += current
-        elif tok[0] == "property" and current is not None:
+        elif line.startswith("element"):
+            m = re.match(r"element (\S+) (\d+)", line)  # meshio's element regexes, generalized
+            if m is None:
+                raise MeshError(f"{p}: cannot read mesh (bad PLY element line {line!r})")
+            current = int(m.group(2))
+            rows_needed += current
+        elif line.startswith("property") and current is not None:
             if len(tok) >= 5 and tok[1] == "list":  # a list holds at least its count
                 min_bytes += current * _PLY_SIZES.get(tok[2], 1)
             elif len(tok) >= 3:
                 min_bytes += current * _PLY_SIZES.get(tok[1], 1)
     if fmt == "ascii":
-        if head.count(b"\n", end) - 1 < lines_needed and size <= len(head):
-            raise MeshError(f"{p}: cannot read mesh (PLY header declares {lines_needed} element "
-                            "lines but the file is shorter: truncated?)")
+        # each element row is at least one line (two bytes) of the body
+        if 2 * rows_needed > body + 1:
+            raise MeshError(f"{p}: cannot read mesh (PLY header declares {rows_needed} element "
+                            f"rows but only {body} bytes follow: truncated?)")
     elif min_bytes > body:
         raise MeshError(f"{p}: cannot read mesh (PLY header declares at least {min_bytes} bytes "
                         f"of data but only {body} follow: truncated?)")
@@ -315,7 +455,13 @@ def _read_meshio(p: Path) -> tuple[np.ndarray, np.ndarray]:
         raise MeshError(f"{p}: mesh is empty (0 vertices)")
     if pts.shape[1] == 2:
         pts = np.concatenate([pts, np.zeros((pts.shape[0], 1))], axis=1)
-    return pts, _triangulate(m.cells)
+    elif pts.shape[1] > 3:  # OBJ "v x y z w" or "v x y z r g b": the position comes first
+        pts = pts[:, :3]
+    try:
+        faces = _triangulate(m.cells)
+    except (OverflowError, TypeError, ValueError) as exc:  # e.g. indices beyond int64
+        raise MeshError(f"{p}: cannot read mesh (bad face indices: {exc})") from None
+    return pts, faces
 
 
 def load_mesh(path: str | os.PathLike) -> Mesh:
@@ -327,6 +473,8 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     unreadable files, NaN/inf coordinates, out-of-range face indices and meshes without faces
     raise :class:`MeshError` naming the file.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise MeshError(f"path must be a str or os.PathLike, got {type(path).__name__}")
     p = Path(path)
     if not p.exists():
         raise MeshError(f"{p}: no such file")
@@ -351,7 +499,7 @@ def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = Non
     import meshio
 
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
+        raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
     import contextlib
     import io
 

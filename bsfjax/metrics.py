@@ -43,14 +43,24 @@ def _check(x, name: str):
 def _relative_error(reference, estimate, mass):
     dt = jnp.result_type(reference, estimate, mass, jnp.float32)
     f = jnp.asarray(reference, dt)
-    d = jnp.asarray(estimate, dt) - f
+    e = jnp.asarray(estimate, dt)
     w = jnp.asarray(mass, dt)
+    # The ratio is invariant to scaling f, f̃ (together) and A, so both are divided by their
+    # largest magnitude first: squares of large values cannot overflow, nor small ones
+    # underflow to a spurious 0/0.  The scales are restored for the absolute error below.
+    s = jnp.maximum(jnp.max(jnp.abs(f), axis=-1), jnp.max(jnp.abs(e), axis=-1))
+    s = jnp.where(s > 0, s, 1.0)
+    ws = jnp.max(w, axis=-1)
+    ws = jnp.where(ws > 0, ws, 1.0)
+    f = f / s[..., None]
+    d = e / s[..., None] - f
+    w = w / ws[..., None]
     num = jnp.sqrt(jnp.sum(w * d * d, axis=-1))
     den = jnp.sqrt(jnp.sum(w * f * f, axis=-1))
     pos = den > 0
     # ‖f‖_A = 0: the ratio is undefined; report the absolute error ‖f̃‖_A instead (0 when the
     # estimate is also zero), never 0/0 = NaN.
-    return jnp.where(pos, num / jnp.where(pos, den, 1.0), num)
+    return jnp.where(pos, num / jnp.where(pos, den, 1.0), num * s * jnp.sqrt(ws))
 
 
 def relative_error(reference, estimate, mass) -> jax.Array:

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._validate import check_finite
 from .coding import decode, encode
 from .errors import BSFError
 from .frame import Frame, build_frame, transfer_frame
@@ -37,6 +38,9 @@ def transfer(frame: Frame, target_frame: Frame, f, method: str = "omp", **option
     image of the source column ``j``, so the source code ``α`` applies to it unchanged:
     ``f_N = B_N α`` with ``α = encode(frame, f)``.  Returns ``(..., n_N)``.
     """
+    for name, fr in (("frame", frame), ("target_frame", target_frame)):
+        if not isinstance(fr, Frame):
+            raise BSFError(f"{name} must be a bsfjax.Frame, got {type(fr).__name__}")
     q_m, q_n = frame.atoms.shape[-1], target_frame.atoms.shape[-1]
     if q_m != q_n:
         raise BSFError(f"target_frame has {q_n} atoms but frame has {q_m}: target_frame must be "
@@ -54,6 +58,10 @@ class PairResult(NamedTuple):
 
 def stack_spectra(spectra: Sequence[Spectrum]) -> Spectrum:
     """Stack spectra of equal ``(n, k)`` along a new leading axis, for ``vmap`` over shapes."""
+    spectra = list(spectra)
+    if not spectra or not all(isinstance(s, Spectrum) for s in spectra):
+        raise BSFError("spectra must be a non-empty sequence of bsfjax.Spectrum, got "
+                       f"{[type(s).__name__ for s in spectra]}")
     shapes = {(s.n_vertices, s.k) for s in spectra}
     if len(shapes) != 1:
         raise BSFError(f"spectra to stack must share (n_vertices, k); got {sorted(shapes)}")
@@ -116,8 +124,8 @@ def transfer_pairs(sources: Spectrum | Sequence[Spectrum], targets: Spectrum | S
     n_m = src.evecs.shape[1]
     if f.ndim != 3 or f.shape[0] != P or f.shape[2] != n_m:
         raise BSFError(f"f must have shape (P={P}, m, n_M={n_m}), got {f.shape}")
-    if not isinstance(f, jax.Array) and not np.all(np.isfinite(f)):
-        raise BSFError("f contains NaN or inf")
+    check_finite(f, "f")
+    check_finite(C, "C")
     if not isinstance(centers, jax.Array) and (centers.min() < 0 or centers.max() >= n_m):
         raise BSFError(f"centers must index source vertices in [0, {n_m}), got "
                        f"[{centers.min()}, {centers.max()}]")

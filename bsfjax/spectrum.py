@@ -14,15 +14,17 @@ import warnings
 from pathlib import Path
 
 import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
-import scipy.sparse.csgraph
 import scipy.sparse.linalg
 
 from ._files import atomic_path
-from .laplacian import laplacian
-from .mesh import Mesh
+from .errors import BSFError, MeshError
+from .laplacian import MASS_TYPES, laplacian
+from .mesh import Mesh, n_components
 
 __all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum"]
 
@@ -43,11 +45,40 @@ class Spectrum(eqx.Module):
     input always gives the same basis.  ``Spectrum`` is a pytree: pass it to jitted functions, or
     stack several of equal shapes with ``jax.tree.map(lambda *x: jnp.stack(x), *spectra)`` to
     ``vmap`` over shapes.
+
+    Constructing a ``Spectrum`` from concrete arrays checks them (:class:`bsfjax.BSFError`):
+    matching shapes, real finite values, ``mass >= 0``; traced values are not checked.
     """
 
     evals: np.ndarray
     evecs: np.ndarray
     mass: np.ndarray
+
+    def __check_init__(self):
+        # Shapes and values are checked whenever a Spectrum is built from concrete arrays, so
+        # a NaN eigenvector or a negative area stops here instead of inside a jitted stage.
+        # (Pytree operations — vmap, jax.tree.map, stacking — do not run this check.)
+        arrays = (self.evals, self.evecs, self.mass)
+        if not all(isinstance(a, (np.ndarray, jax.Array)) for a in arrays) \
+                or any(isinstance(a, jax.core.Tracer) for a in arrays):
+            return  # traced or abstract values: nothing concrete to check
+        ev, phi, m = (tuple(a.shape) for a in arrays)
+        if len(ev) < 1 or len(phi) < 2 or len(m) < 1 or phi[-1] != ev[-1] or phi[-2] != m[-1] \
+                or not (phi[:-2] == ev[:-1] == m[:-1]):
+            raise BSFError(f"Spectrum needs evals (..., k), evecs (..., n, k) and mass (..., n) "
+                           f"with equal batch axes, got shapes {ev}, {phi}, {m}")
+        for name, a in zip(("evals", "evecs", "mass"), arrays):
+            if not (jnp.issubdtype(a.dtype, jnp.floating) or jnp.issubdtype(a.dtype, jnp.integer)):
+                raise BSFError(f"Spectrum.{name} must be real numbers, got dtype {a.dtype}")
+            bad = int(jnp.sum(~jnp.isfinite(a))) if isinstance(a, jax.Array) \
+                else int(np.sum(~np.isfinite(a)))
+            if bad:
+                raise BSFError(f"Spectrum.{name} contains {bad} NaN or infinite values")
+        neg = int(jnp.sum(self.mass < 0)) if isinstance(self.mass, jax.Array) \
+            else int(np.sum(self.mass < 0))
+        if neg:
+            raise BSFError(f"Spectrum.mass (vertex areas) must be >= 0, found {neg} negative "
+                           "entries")
 
     @property
     def k(self) -> int:
@@ -64,8 +95,9 @@ class Spectrum(eqx.Module):
 
     def truncate(self, k: int) -> "Spectrum":
         """The first ``k`` eigenpairs."""
-        if not 1 <= k <= self.k:
-            raise ValueError(f"k must be in [1, {self.k}], got {k}")
+        if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) \
+                or not 1 <= k <= self.k:
+            raise BSFError(f"k must be an integer in [1, {self.k}], got {k!r}")
         return Spectrum(self.evals[..., :k], self.evecs[..., :k], self.mass)
 
 
@@ -106,20 +138,31 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None) -> Spec
     Uses ARPACK shift-invert with a fixed start vector (deterministic), or dense LAPACK when
     ``n <= DENSE_LIMIT``.  Eigenvectors are A-orthonormalized and sign-fixed.
     """
-    W = sp.csr_matrix(W) if not sp.issparse(W) else W.tocsr()
+    try:
+        W = sp.csr_matrix(W, dtype=np.float64) if not sp.issparse(W) \
+            else W.tocsr().astype(np.float64)
+        a = np.asarray(A.diagonal() if sp.issparse(A) else (np.diag(A) if np.ndim(A) == 2 else A),
+                       dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise BSFError(f"W and A must be real numeric matrices ({exc})") from None
     n = W.shape[0]
-    if W.shape != (n, n):
-        raise ValueError(f"W must be square, got shape {W.shape}")
-    a = np.asarray(A.diagonal() if sp.issparse(A) else (np.diag(A) if np.ndim(A) == 2 else A),
-                   dtype=np.float64)
+    if W.ndim != 2 or W.shape != (n, n) or n == 0:
+        raise BSFError(f"W must be a non-empty square matrix, got shape {W.shape}")
     if a.shape != (n,):
-        raise ValueError(f"A must be ({n}, {n}) or its diagonal ({n},), got shape {np.shape(A)}")
+        raise BSFError(f"A must be ({n}, {n}) or its diagonal ({n},), got shape {np.shape(A)}")
     if not np.all(np.isfinite(a)) or not np.all(np.isfinite(W.data)):
-        raise ValueError("W and A must be finite (found NaN or inf)")
+        raise BSFError("W and A must be finite (found NaN or inf)")
     if np.any(a <= 0):
-        raise ValueError(f"A must have a positive diagonal; {int(np.sum(a <= 0))} entries are <= 0")
+        raise BSFError(f"A must have a positive diagonal; {int(np.sum(a <= 0))} entries are <= 0")
+    asym = abs(W - W.T).max() if W.nnz else 0.0
+    if asym > 1e-10 * max(abs(W).max(), np.finfo(float).tiny):
+        raise BSFError(f"W must be symmetric, found |W - W^T| up to {asym:.3g}")
     if not isinstance(k, (int, np.integer)) or isinstance(k, bool) or not 1 <= k <= n:
-        raise ValueError(f"k must be an integer in [1, n={n}], got {k!r}")
+        raise BSFError(f"k must be an integer in [1, n={n}], got {k!r}")
+    if sigma is not None and (isinstance(sigma, (bool, np.bool_))
+                              or not isinstance(sigma, (int, float, np.integer, np.floating))
+                              or not np.isfinite(sigma)):
+        raise BSFError(f"sigma must be a finite number or None, got {sigma!r}")
     Am = sp.diags(a).tocsr()
     if n <= DENSE_LIMIT or k >= n - 1:
         evals, evecs = scipy.linalg.eigh(W.toarray(), np.diag(a), subset_by_index=[0, k - 1])
@@ -128,24 +171,23 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None) -> Spec
             scale = float(W.diagonal().mean() / a.mean())  # ~ largest eigenvalues' scale
             sigma = -1e-6 * scale
         v0 = np.random.default_rng(0).standard_normal(n)  # fixed start: deterministic result
-        evals, evecs = scipy.sparse.linalg.eigsh(W.tocsc(), k=k, M=Am.tocsc(), sigma=sigma,
-                                                 which="LM", v0=v0,
-                                                 OPinv=_shift_invert(W, Am, sigma))
+        try:
+            evals, evecs = scipy.sparse.linalg.eigsh(W.tocsc(), k=k, M=Am.tocsc(), sigma=sigma,
+                                                     which="LM", v0=v0,
+                                                     OPinv=_shift_invert(W, Am, sigma))
+        except scipy.sparse.linalg.ArpackNoConvergence as exc:  # (a RuntimeError too)
+            raise BSFError(f"eigensolver did not converge for k={k} ({exc})") from None
+        except RuntimeError as exc:  # W − σA singular: σ is an eigenvalue
+            raise BSFError(f"eigensolver failed with sigma={sigma!r} ({exc}); W - sigma*A must "
+                           "be non-singular, choose another shift") from None
+    if not (np.isfinite(evals).all() and np.isfinite(evecs).all()):
+        raise BSFError("the eigensolver returned NaN or inf (ill-conditioned W or A)")
     order = np.argsort(evals)
     evals, evecs = evals[order], evecs[:, order]
     norms = np.sqrt(np.einsum("ij,i,ij->j", evecs, a, evecs))
     evecs = _fix_signs(evecs / norms)
     evals = np.maximum(evals, 0.0)
     return Spectrum(evals=evals, evecs=evecs, mass=a)
-
-
-def _n_components(mesh: Mesh) -> int:
-    f = mesh.faces
-    n = mesh.n_vertices
-    rows = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
-    cols = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
-    g = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
-    return int(scipy.sparse.csgraph.connected_components(g, directed=False)[0])
 
 
 def _cache_key(mesh: Mesh, k: int, mass: str, robust: bool) -> str:
@@ -188,22 +230,28 @@ def spectrum(mesh: Mesh, k: int, *, mass: str = "mixed", robust: bool = False,
     Solves ``W φ = λ A φ`` with the cotangent stiffness and lumped mass of :func:`laplacian`
     (shift-invert Lanczos; dense LAPACK for tiny meshes).  With ``cache_dir`` the result is
     stored in ``cache_dir/<sha256 of vertices, faces, k, options>.npz``, written atomically and
-    checksummed; a corrupt cache file is recomputed, never trusted.
+    checksummed; a corrupt cache file is recomputed, never trusted, and a cache that cannot be
+    written (read-only folder, full disk) only gives a warning.
 
     A mesh with ``c`` connected components has ``c`` zero eigenvalues; a warning says so.
     """
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
+        raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
     n = mesh.n_vertices
     if not isinstance(k, (int, np.integer)) or isinstance(k, bool) or not 1 <= k <= n:
-        raise ValueError(f"k must be an integer in [1, n_vertices={n}], got {k!r}")
+        where = f" (mesh {mesh.name})" if mesh.name else ""
+        raise BSFError(f"k must be an integer in [1, n_vertices={n}], got {k!r}{where}")
+    if mass not in MASS_TYPES:
+        raise BSFError(f"mass must be one of {MASS_TYPES}, got {mass!r}")
     path = None
     if cache_dir is not None:
+        if not isinstance(cache_dir, (str, os.PathLike)) or Path(cache_dir).is_file():
+            raise BSFError(f"cache_dir must be a folder path, got {cache_dir!r}")
         path = Path(cache_dir) / f"{_cache_key(mesh, k, mass, robust)}.npz"
         cached = _load_cached(path, n, k)
         if cached is not None:
             return cached
-    comps = _n_components(mesh)
+    comps = n_components(mesh)
     if comps > 1:
         where = f"{mesh.name}: " if mesh.name else ""
         warnings.warn(f"{where}mesh has {comps} connected components, so its first {comps} "
@@ -211,9 +259,13 @@ def spectrum(mesh: Mesh, k: int, *, mass: str = "mixed", robust: bool = False,
     W, A = laplacian(mesh, mass=mass, robust=robust)
     result = spectrum_from_operators(W, A, k)
     if path is not None:
-        with atomic_path(path) as tmp:
-            np.savez(tmp, evals=result.evals, evecs=result.evecs, mass=result.mass,
-                     checksum=np.array(_checksum(result.evals, result.evecs, result.mass)))
+        try:
+            with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+                np.savez(fh, evals=result.evals, evecs=result.evecs, mass=result.mass,
+                         checksum=np.array(_checksum(result.evals, result.evecs, result.mass)))
+        except OSError as exc:  # a full disk or read-only cache must not lose the result
+            warnings.warn(f"could not write spectrum cache file {path} ({exc}); continuing "
+                          "without caching it", stacklevel=2)
     return result
 
 
@@ -223,10 +275,12 @@ def interval_operators(n: int, length: float = 1.0) -> tuple[sp.csr_matrix, np.n
     Stiffness ``W = (1/h)·tridiag(−1, 2, −1)`` with 1 on the two end diagonals; lumped mass ``h``
     inside and ``h/2`` at the ends.
     """
-    if not isinstance(n, (int, np.integer)) or n < 2:
-        raise ValueError(f"n must be an integer >= 2, got {n!r}")
-    if not np.isfinite(length) or length <= 0:
-        raise ValueError(f"length must be positive and finite, got {length!r}")
+    if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 2:
+        raise BSFError(f"n must be an integer >= 2, got {n!r}")
+    if isinstance(length, (bool, np.bool_)) \
+            or not isinstance(length, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(length) or length <= 0:
+        raise BSFError(f"length must be positive and finite, got {length!r}")
     h = length / (n - 1)
     main = np.full(n, 2.0 / h)
     main[[0, -1]] = 1.0 / h

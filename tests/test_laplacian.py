@@ -85,7 +85,7 @@ def test_robust_option(sphere_mesh):
 def test_errors(sphere_mesh):
     with pytest.raises(ValueError, match="mass must be one of"):
         bsfjax.laplacian(sphere_mesh, mass="voronoi-ish")
-    with pytest.raises(TypeError, match="bsfjax.Mesh"):
+    with pytest.raises(bsfjax.MeshError, match="bsfjax.Mesh"):
         bsfjax.laplacian(np.zeros((3, 3)))
     v, f = icosphere(1)
     lonely = Mesh(np.concatenate([v, [[5.0, 5, 5]]]), f)  # vertex 12 in no face
