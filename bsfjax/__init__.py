@@ -14,7 +14,7 @@ from importlib.metadata import PackageNotFoundError, version as _version
 
 from .errors import BSFError, MeshError
 from .laplacian import laplacian
-from .mesh import Mesh, load_mesh, save_mesh
+from .mesh import Mesh, MeshReport, load_mesh, mesh_report, save_mesh
 from .example import ExamplePair, example_mesh, example_pair
 from .spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_operators
 from .sampling import farthest_point_sampling
@@ -71,6 +71,8 @@ __all__ = [
     "prune_frame",
     "unique_atoms",
     "Mesh",
+    "MeshReport",
+    "mesh_report",
     "MeshError",
     "Spectrum",
     "interval_spectrum",
