@@ -18,6 +18,7 @@ from .mesh import Mesh, load_mesh, save_mesh
 from .example import ExamplePair, example_mesh, example_pair
 from .spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_operators
 from .sampling import farthest_point_sampling
+from .sparse_frame import SparseFrame
 from .frame import Frame, build_frame, transfer_frame
 from .coding import CodingInfo, decode, encode
 from .pipeline import PairResult, approximate, stack_spectra, transfer, transfer_pairs
@@ -63,6 +64,7 @@ __all__ = [
     "example_pair",
     "BSFError",
     "Frame",
+    "SparseFrame",
     "build_frame",
     "farthest_point_sampling",
     "transfer_frame",

@@ -35,6 +35,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+import scipy.sparse as sp
 import warnings
 
 with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintained; it works
@@ -43,7 +44,8 @@ with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintaine
     from jaxopt.prox import prox_lasso
 
 from .errors import BSFError
-from .frame import Frame
+from .frame import DENSE_BUDGET_BYTES, Frame
+from .sparse_frame import SparseFrame, ell_matmul, ell_rmatmul, sparse_gram
 
 __all__ = ["CodingInfo", "encode", "decode", "METHODS"]
 
@@ -317,6 +319,8 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
     about 1M buffered numbers (``chunk · steps · q``), which bounds memory and keeps the
     per-step work in cache.
     """
+    if isinstance(frame, SparseFrame):
+        return _encode_sparse(frame, f, method, weights, return_info, options)
     atoms, mass = _unpack_frame(frame)
     n, q = int(atoms.shape[0]), int(atoms.shape[1])
     f = _check_functions(f, n)
@@ -357,8 +361,20 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
 def decode(frame, alpha) -> jax.Array:
     r"""Functions ``f = α Bᵀ`` (``(..., n)``) from coefficients ``α`` (``(..., q)``).
 
-    ``frame`` is a :class:`~bsfjax.Frame` or a plain ``(n, q)`` atom array.
+    ``frame`` is a :class:`~bsfjax.Frame`, a :class:`~bsfjax.SparseFrame` (gather-sum over each
+    vertex's atoms, never densified) or a plain ``(n, q)`` atom array.
     """
+    if isinstance(frame, SparseFrame):
+        q = frame.n_atoms
+        if not hasattr(alpha, "shape"):
+            alpha = np.asarray(alpha)
+        if alpha.ndim < 1 or alpha.shape[-1] != q:
+            raise BSFError(f"alpha must have shape (..., q) with q = {q} atoms, got "
+                           f"{tuple(alpha.shape)}")
+        dtype = _float_dtype(alpha, frame.coeffs)
+        lead = tuple(alpha.shape[:-1])
+        A = jnp.reshape(jnp.asarray(alpha, dtype), (-1, q))
+        return jnp.reshape(ell_matmul(frame.atom_lists, A.T).T, lead + (frame.n_vertices,))
     atoms, _ = _unpack_frame(frame)
     q = int(atoms.shape[1])
     if not hasattr(alpha, "shape"):
@@ -405,11 +421,139 @@ def _encode_batch(B, F, sqrt_w, dynamic, *, method, static):
         if method == "omp":
             converged = (n_sel == static["n_steps"]) | exhausted
     else:  # lasso
-        alpha, err = _lasso(B, C, fnorm2, dynamic["lam"], dynamic["init"],
+        alpha, err = _lasso(_gram(B), C, fnorm2, dynamic["lam"], dynamic["init"],
                             static["maxiter"], static["tol"])
         converged = err <= static["tol"]
     R = F - alpha @ B.T
     res2 = jnp.sum(R * R, axis=1)
+    if method == "omp_error":
+        converged = res2 <= eps
+    info = CodingInfo(n_atoms=jnp.sum(alpha != 0, axis=1, dtype=jnp.int32),
+                      residual=jnp.sqrt(res2), converged=converged)
+    return alpha, info
+
+
+# ----------------------------------------------------------------------------------------------
+# Sparse frames: the same algorithms on BᵀWB (host, scipy CSR) and ELL products of B
+# ----------------------------------------------------------------------------------------------
+
+
+def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options):
+    """:func:`encode` for a :class:`SparseFrame`.
+
+    The Gram matrix ``G = BᵀWB`` is formed on the host as a scipy CSR product (exact overlap
+    counts for ``W = I``, cost ``Σ_v D_v²``); OMP reads its rows from a padded row layout
+    (``O(nnz(G))`` memory), ``lstsq``/``lasso`` need it dense and so are limited to frames with
+    ``q² · 8`` bytes within :data:`~bsfjax.frame.DENSE_BUDGET_BYTES`.  Correlations ``BᵀWf`` and
+    residuals use the chunked ELL products of ``sparse_frame.py``.  Needs a concrete frame.
+    """
+    n, q = frame.n_vertices, frame.n_atoms
+    if _is_traced(frame.atom_lists):
+        raise BSFError("encode with a SparseFrame needs a concrete frame (its Gram matrix is "
+                       "formed on the host): call it outside jit/vmap or use a dense Frame")
+    f = _check_functions(f, n)
+    lead = tuple(f.shape[:-1])
+    static, dynamic = _check_options(method, options, q, lead)
+    w = _check_weights(weights, frame.mass, n)
+    if not isinstance(return_info, bool):
+        raise BSFError(f"return_info must be a bool, got {return_info!r}")
+    dtype = _float_dtype(f, frame.coeffs)
+    m = int(np.prod(lead, dtype=np.int64))
+    if method in ("lstsq", "lasso") and q * q * 8 > DENSE_BUDGET_BYTES:
+        raise BSFError(f"method={method!r} needs the dense q × q Gram matrix (q = {q}: "
+                       f"{q * q * 8 / 2**30:.1f} GiB > DENSE_BUDGET_BYTES); use 'omp' or "
+                       "'omp_error' for frames this large")
+    if m == 0:
+        alpha = jnp.zeros(lead + (q,), dtype)
+        info = CodingInfo(jnp.zeros(lead, jnp.int32), jnp.zeros(lead, dtype),
+                          jnp.ones(lead, bool))
+        return (alpha, info) if return_info else alpha
+    G = sparse_gram(frame, None if w is None else np.asarray(w, np.float64))
+    norms2 = G.diagonal()
+    if method in ("omp", "omp_error"):
+        static.pop("precompute")  # rows come from the sparse Gram matrix either way
+        static["chunk"] = max(1, min(m, _OMP_CHUNK_ELEMS // (static["n_steps"] * q)))
+        inv = np.where(norms2 > 0, 1.0 / np.sqrt(np.where(norms2 > 0, norms2, 1.0)), 0.0)
+        Gn = sp.diags(inv) @ G @ sp.diags(inv)
+        gram = _padded_rows(Gn.tocsr(), q, dtype)
+    else:
+        gram = jnp.asarray(G.toarray(), dtype)
+    if "eps" in dynamic:
+        dynamic["eps"] = jnp.reshape(jnp.broadcast_to(jnp.asarray(dynamic["eps"], dtype), lead),
+                                     (m,))
+    if dynamic.get("init") is not None:
+        dynamic["init"] = jnp.reshape(jnp.asarray(dynamic["init"], dtype), (m, q))
+    F = jnp.reshape(jnp.asarray(f, dtype), (m, n))
+    wv = jnp.ones(n, dtype) if w is None else jnp.asarray(w, dtype)
+    alpha, info = _encode_sparse_batch(frame.atom_lists, F, wv, gram, jnp.asarray(norms2, dtype),
+                                       dynamic, method=method,
+                                       static=tuple(sorted(static.items())))
+    alpha = jnp.reshape(alpha, lead + (q,))
+    if not return_info:
+        return alpha
+    return alpha, jax.tree.map(lambda x: jnp.reshape(x, lead), info)
+
+
+def _padded_rows(G: "sp.csr_matrix", q: int, dtype):
+    """``(cols, vals)`` ``(q, R)``: row ``j`` of ``G`` as column indices padded with ``q``."""
+    counts = np.diff(G.indptr)
+    R = max(1, int(counts.max(initial=0)))
+    slot = np.arange(G.nnz) - np.repeat(G.indptr[:-1], counts)
+    row = np.repeat(np.arange(q), counts)
+    cols = np.full((q, R), q, np.int32)
+    vals = np.zeros((q, R), np.float64)
+    cols[row, slot] = G.indices
+    vals[row, slot] = G.data
+    return jnp.asarray(cols), jnp.asarray(vals, dtype)
+
+
+@partial(jax.jit, static_argnames=("method", "static"))
+def _encode_sparse_batch(lists, F, w, gram, norms2, dynamic, *, method, static):
+    """``lists`` ``(n, D)``, ``F`` ``(m, n)``, ``w`` ``(n,)``; ``gram``: ``(cols, vals)`` of the
+    normalised Gram matrix (OMP) or the dense ``BᵀWB`` (lstsq, lasso)."""
+    static = dict(static)
+    m = F.shape[0]
+    q = norms2.shape[0]
+
+    def Bt(Y):  # rows (m, n) -> rows of Bᵀ W y (m, q)
+        return ell_rmatmul(lists, (Y * w).T, q).T
+
+    def Bx(A):  # rows (m, q) -> rows of B α (m, n)
+        return ell_matmul(lists, A.T).T
+
+    C = Bt(F)
+    fnorm2 = jnp.sum(w * F * F, axis=1)
+    if method == "lstsq":
+        alpha = _lstsq_gram(gram, C, lambda a: Bt(F - Bx(a)), norms2 > 0, dynamic["rcond"])
+        converged = jnp.ones(m, bool)
+    elif method in ("omp", "omp_error"):
+        cols, vals = gram
+        if method == "omp":
+            eps = jnp.full(m, -jnp.inf, F.dtype)
+        elif static["eps_mode"] == "relative":
+            eps = (EPS_FRACTION**2) * fnorm2
+        elif static["eps_mode"] == "spams":
+            eps = EPS_FRACTION * jnp.sqrt(fnorm2)
+        else:
+            eps = dynamic["eps"]
+        valid = norms2 > 0
+        inv_norm = jnp.where(valid, 1.0 / jnp.sqrt(jnp.where(valid, norms2, 1.0)), 0.0)
+
+        def gram_rows(k):  # (b,) -> (b, q) rows of DᵀD from the padded sparse rows
+            b = k.shape[0]
+            out = jnp.zeros((b, q + 1), vals.dtype)
+            return out.at[jnp.arange(b)[:, None], cols[k]].add(vals[k])[:, :q]
+
+        alpha, n_sel, exhausted = _omp_loop(gram_rows, inv_norm, valid, C, fnorm2, eps,
+                                            static["n_steps"], static["chunk"])
+        if method == "omp":
+            converged = (n_sel == static["n_steps"]) | exhausted
+    else:
+        alpha, err = _lasso(gram, C, fnorm2, dynamic["lam"], dynamic["init"],
+                            static["maxiter"], static["tol"])
+        converged = err <= static["tol"]
+    R = F - Bx(alpha)
+    res2 = jnp.sum(w * R * R, axis=1)
     if method == "omp_error":
         converged = res2 <= eps
     info = CodingInfo(n_atoms=jnp.sum(alpha != 0, axis=1, dtype=jnp.int32),
@@ -434,10 +578,16 @@ def _gram32(B):
 
 def _lstsq(B, F, C, rcond):
     """Minimum-norm least squares via the eigendecomposition of ``G = BᵀB``."""
-    dtype = B.dtype
+    return _lstsq_gram(_gram(B), C, lambda alpha: (F - alpha @ B.T) @ B,
+                       jnp.any(B != 0, axis=0), rcond)
+
+
+def _lstsq_gram(G, C, resid_corr, nonempty, rcond):
+    """``α = G⁺ C`` rows, refined once with ``resid_corr(α) = Bᵀ(f − Bα)`` rows."""
+    dtype = G.dtype
     if rcond is None:
         rcond = math.sqrt(10 * float(jnp.finfo(dtype).eps))
-    lam, V = jnp.linalg.eigh(_gram(B))
+    lam, V = jnp.linalg.eigh(G)
     keep = lam > (rcond * rcond) * lam[-1]  # s_i > rcond·s_max (lam ≥ 0 up to rounding)
     inv = jnp.where(keep, 1.0 / jnp.where(keep, lam, 1.0), 0.0)
 
@@ -448,10 +598,10 @@ def _lstsq(B, F, C, rcond):
     # One step of iterative refinement with the residual computed against B itself: the
     # normal equations lose accuracy as κ(B)², the refined solution only as κ(B).  The update
     # stays in the range of G⁺, so the solution keeps minimum norm.
-    alpha = alpha + solve((F - alpha @ B.T) @ B)
+    alpha = alpha + solve(resid_corr(alpha))
     # Empty atoms are exactly 0 in the minimum-norm solution; the eigenvectors only get that
     # to rounding, so make it exact (and n_atoms meaningful).
-    return jnp.where(jnp.any(B != 0, axis=0), alpha, 0.0)
+    return jnp.where(nonempty, alpha, 0.0)
 
 
 #: Functions are coded in chunks whose OMP buffers (``chunk × steps × q`` Gram rows) hold about
@@ -477,9 +627,6 @@ def _omp(B, C, fnorm2, eps, n_steps: int, gram: bool, chunk: int):
     ``‖r‖² ≤ ε``, or ``d² ≤ 100·eps`` (atom ``k`` dependent on ``I``); so a function still
     running at step ``t`` has exactly ``t`` atoms, and every update writes slot ``t``.
     """
-    dtype = B.dtype
-    m, q = C.shape
-    T = n_steps
     norms = jnp.sqrt(jnp.sum(B * B, axis=0))
     valid = norms > 0
     inv_norm = jnp.where(valid, 1.0 / jnp.where(valid, norms, 1.0), 0.0)
@@ -494,6 +641,15 @@ def _omp(B, C, fnorm2, eps, n_steps: int, gram: bool, chunk: int):
         def gram_rows(k):  # only the selected atoms' rows: O(n q) per function
             return Dn[:, k].T @ Dn
 
+    return _omp_loop(gram_rows, inv_norm, valid, C, fnorm2, eps, n_steps, chunk)
+
+
+def _omp_loop(gram_rows, inv_norm, valid, C, fnorm2, eps, n_steps: int, chunk: int):
+    """The Batch-OMP iterations of :func:`_omp` given ``gram_rows(k)`` ``(b,) -> (b, q)`` rows
+    of the normalised Gram matrix ``DᵀD`` and the inverse atom norms (0 for empty atoms)."""
+    dtype = C.dtype
+    m, q = C.shape
+    T = n_steps
     tiny = jnp.finfo(dtype).eps
     tol_dep = 100 * jnp.finfo(dtype).eps
     slots = jnp.arange(T)
@@ -588,7 +744,7 @@ def _spectral_bound(G, iters: int = 30):
     return jnp.where(bound > 0, bound, 1.0)
 
 
-def _lasso(B, C, fnorm2, lam, init, maxiter: int, tol: float):
+def _lasso(G, C, fnorm2, lam, init, maxiter: int, tol: float):
     r"""``min_α ½αᵀGα − αᵀc + λ‖α‖₁`` per row ``c`` of ``C``, ``λ = lam·‖c‖∞``.
 
     Solved in normalised coordinates ``α = s·z`` with ``s = ‖f‖ / √L`` (``L ≥ λ_max(G)``):
@@ -597,7 +753,6 @@ def _lasso(B, C, fnorm2, lam, init, maxiter: int, tol: float):
     FISTA runs with step 1, and a step ``‖Δz‖`` bounds the change of the approximation,
     ``‖BΔα‖ ≤ √L‖Δα‖ = ‖f‖·‖Δz‖``: ``tol`` is relative to ``‖f‖`` and scale free.
     """
-    G = _gram(B)
     L = _spectral_bound(G)
     Gh = G / L
     fnorm = jnp.sqrt(fnorm2)

@@ -37,7 +37,7 @@ def transfer(frame: Frame, target_frame: Frame, f, method: str = "omp", **option
     image of the source column ``j``, so the source code ``α`` applies to it unchanged:
     ``f_N = B_N α`` with ``α = encode(frame, f)``.  Returns ``(..., n_N)``.
     """
-    q_m, q_n = frame.atoms.shape[-1], target_frame.atoms.shape[-1]
+    q_m, q_n = frame.n_atoms, target_frame.n_atoms
     if q_m != q_n:
         raise BSFError(f"target_frame has {q_n} atoms but frame has {q_m}: target_frame must be "
                        "transfer_frame(frame, C, target_spectrum)")
@@ -63,7 +63,7 @@ def stack_spectra(spectra: Sequence[Spectrum]) -> Spectrum:
 @partial(jax.jit, static_argnames=("taus", "gammas", "method", "options", "tau_convention"))
 def _pairs_kernel(source, target, C, centers, F, *, taus, gammas, method, options, tau_convention):
     def one(src, tgt, c, ctr, f):
-        frame = build_frame(src, ctr, taus, gammas, tau_convention=tau_convention)
+        frame = build_frame(src, ctr, taus, gammas, tau_convention=tau_convention, sparse=False)
         tframe = transfer_frame(frame, c, tgt)
         alpha = encode(frame, f, method, **dict(options))
         return PairResult(alpha, decode(frame, alpha), decode(tframe, alpha))
@@ -123,7 +123,8 @@ def transfer_pairs(sources: Spectrum | Sequence[Spectrum], targets: Spectrum | S
                        f"[{centers.min()}, {centers.max()}]")
     # run the Python-side validation of the stages once on the first pair (concrete values)
     first = jax.tree.map(lambda x: x[0], src)
-    frame0 = build_frame(first, centers[0], taus, gamma, tau_convention=tau_convention)
+    frame0 = build_frame(first, centers[0], taus, gamma, tau_convention=tau_convention,
+                         sparse=False)
     encode(frame0.atoms, f[0, :1], method, **options)
     n_c = centers.shape[1]
     # per-scale τ and γ as static tuples (build_frame validates concrete values)
