@@ -28,6 +28,7 @@ need concrete data are skipped for traced inputs; shape checks still run).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from functools import partial
 from typing import Any, NamedTuple
@@ -43,6 +44,7 @@ with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintaine
     from jaxopt import ProximalGradient
     from jaxopt.prox import prox_lasso
 
+from ._devices import map_over_devices, n_devices
 from .errors import BSFError
 from .frame import DENSE_BUDGET_BYTES, Frame
 from .sparse_frame import SparseFrame, ell_matmul, ell_rmatmul, sparse_gram
@@ -350,8 +352,8 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
         info = CodingInfo(jnp.zeros(lead, jnp.int32), jnp.zeros(lead, dtype),
                           jnp.ones(lead, bool))
         return (alpha, info) if return_info else alpha
-    alpha, info = _encode_batch(B, F, sqrt_w, dynamic, method=method,
-                                static=tuple(sorted(static.items())))
+    alpha, info = _run_batch(_BatchEntry(False, method, tuple(sorted(static.items()))),
+                             (B, sqrt_w), F, dynamic)
     alpha = jnp.reshape(alpha, lead + (q,))
     if not return_info:
         return alpha
@@ -389,6 +391,49 @@ def decode(frame, alpha) -> jax.Array:
 @jax.jit
 def _decode(B: jax.Array, alpha: jax.Array) -> jax.Array:
     return jnp.einsum("...q,nq->...n", alpha, B)
+
+
+# ----------------------------------------------------------------------------------------------
+# Dispatch: one device, or the function axis split over all devices
+# ----------------------------------------------------------------------------------------------
+
+#: Options that hold one value per function (split with the functions across devices).
+_PER_FUNCTION = ("eps", "init")
+
+
+@dataclasses.dataclass(frozen=True)
+class _BatchEntry:
+    """The batch kernel for one (frame kind, method, static options): hashable, so that its
+    multi-device wrapper is compiled once."""
+
+    sparse: bool
+    method: str
+    static: tuple
+
+    def __call__(self, replicated, per_function):
+        frame_args, dyn_rep = replicated
+        F, dyn_per = per_function
+        dynamic = {**dyn_rep, **dyn_per}
+        if self.sparse:
+            lists, w, gram, norms2 = frame_args
+            return _encode_sparse_batch(lists, F, w, gram, norms2, dynamic, method=self.method,
+                                        static=self.static)
+        B, sqrt_w = frame_args
+        return _encode_batch(B, F, sqrt_w, dynamic, method=self.method, static=self.static)
+
+
+def _run_batch(entry: _BatchEntry, frame_args, F, dynamic):
+    """Run ``entry`` on the ``(m, n)`` functions ``F``.  With several JAX devices (and at least
+    one function per device, outside any trace) the functions are split evenly over them
+    (:func:`bsfjax._devices.map_over_devices`); each device codes its functions with the same
+    kernel, so the result is the single-device one."""
+    per = {k: v for k, v in dynamic.items() if k in _PER_FUNCTION and v is not None}
+    rep = {k: v for k, v in dynamic.items() if k not in per}
+    m = F.shape[0]
+    d = n_devices()
+    if d > 1 and m >= d and not _is_traced(F):
+        return map_over_devices(entry, (frame_args, rep), (F, per), m)
+    return entry((frame_args, rep), (F, per))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -485,9 +530,8 @@ def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options)
         dynamic["init"] = jnp.reshape(jnp.asarray(dynamic["init"], dtype), (m, q))
     F = jnp.reshape(jnp.asarray(f, dtype), (m, n))
     wv = jnp.ones(n, dtype) if w is None else jnp.asarray(w, dtype)
-    alpha, info = _encode_sparse_batch(frame.atom_lists, F, wv, gram, jnp.asarray(norms2, dtype),
-                                       dynamic, method=method,
-                                       static=tuple(sorted(static.items())))
+    alpha, info = _run_batch(_BatchEntry(True, method, tuple(sorted(static.items()))),
+                             (frame.atom_lists, wv, gram, jnp.asarray(norms2, dtype)), F, dynamic)
     alpha = jnp.reshape(alpha, lead + (q,))
     if not return_info:
         return alpha

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._devices import pad_leading, shard_leading
 from .coding import decode, encode
 from .errors import BSFError
 from .frame import Frame, build_frame, transfer_frame
@@ -96,7 +97,8 @@ def transfer_pairs(sources: Spectrum | Sequence[Spectrum], targets: Spectrum | S
     With several JAX devices (GPUs, or CPU devices from
     ``XLA_FLAGS=--xla_force_host_platform_device_count=N``) the pair axis is sharded across them
     automatically (``jax.sharding``, a 1-D device mesh named ``"pairs"``): no code change, same
-    results.
+    results.  (:func:`bsfjax.encode`, and so :func:`approximate` and :func:`transfer`, split
+    the function axis of a batch over the devices the same way.)
     """
     src = stack_spectra(sources) if not isinstance(sources, Spectrum) else sources
     tgt = stack_spectra(targets) if not isinstance(targets, Spectrum) else targets
@@ -147,18 +149,5 @@ def _shard_pairs(args, devices):
     device computes whole pairs, which keeps results identical to a single-device run.  Padding
     repeats the last pair and is sliced off by the caller.
     """
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
-
     d = len(devices)
-    P = np.shape(args[2])[0]
-    pad = (-P) % d
-
-    def place(x):
-        x = jnp.asarray(x)
-        if pad:
-            x = jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)], axis=0)
-        spec = PartitionSpec("pairs", *([None] * (x.ndim - 1)))
-        return jax.device_put(x, NamedSharding(mesh, spec))
-
-    mesh = Mesh(np.asarray(devices), ("pairs",))
-    return jax.tree.map(place, args)
+    return jax.tree.map(lambda x: shard_leading(pad_leading(x, d, "edge"), "pairs"), args)
