@@ -36,7 +36,6 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.sparse as sp
 import warnings
 
 with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintained; it works
@@ -47,7 +46,7 @@ with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintaine
 from ._devices import map_over_devices, n_devices
 from .errors import BSFError
 from .frame import DENSE_BUDGET_BYTES, Frame
-from .sparse_frame import SparseFrame, ell_matmul, ell_rmatmul, sparse_gram
+from .sparse_frame import SparseFrame, ell_matmul, ell_rmatmul
 
 __all__ = ["CodingInfo", "encode", "decode", "METHODS"]
 
@@ -486,15 +485,18 @@ def _encode_batch(B, F, sqrt_w, dynamic, *, method, static):
 def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options):
     """:func:`encode` for a :class:`SparseFrame`.
 
-    The Gram matrix ``G = BᵀWB`` is formed on the host as a scipy CSR product (exact overlap
-    counts for ``W = I``, cost ``Σ_v D_v²``); OMP reads its rows from a padded row layout
-    (``O(nnz(G))`` memory), ``lstsq``/``lasso`` need it dense and so are limited to frames with
-    ``q² · 8`` bytes within :data:`~bsfjax.frame.DENSE_BUDGET_BYTES`.  Correlations ``BᵀWf`` and
-    residuals use the chunked ELL products of ``sparse_frame.py``.  Needs a concrete frame.
+    OMP needs only the Gram rows ``G[k, :] = b_kᵀ W B`` of the atoms it selects (at most
+    ``steps`` per function).  They are computed on the host when selected, as sparse products
+    of ``B``'s scipy CSR form (``O(|supp b_k| · D)`` each, via :func:`jax.pure_callback`), so
+    the ``q × q`` Gram matrix is never formed — its full product would cost ``Σ_v D_v²``,
+    e.g. ~50 G operations at 160K vertices.  ``lstsq``/``lasso`` do need ``G`` dense (host
+    CSR product, then densified) and so are limited to frames with ``q² · 8`` bytes within
+    :data:`~bsfjax.frame.DENSE_BUDGET_BYTES`.  Correlations ``BᵀWf`` and residuals use the
+    chunked ELL products of ``sparse_frame.py``.  Needs a concrete frame.
     """
     n, q = frame.n_vertices, frame.n_atoms
     if _is_traced(frame.atom_lists):
-        raise BSFError("encode with a SparseFrame needs a concrete frame (its Gram matrix is "
+        raise BSFError("encode with a SparseFrame needs a concrete frame (its Gram rows are "
                        "formed on the host): call it outside jit/vmap or use a dense Frame")
     f = _check_functions(f, n)
     lead = tuple(f.shape[:-1])
@@ -513,16 +515,17 @@ def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options)
         info = CodingInfo(jnp.zeros(lead, jnp.int32), jnp.zeros(lead, dtype),
                           jnp.ones(lead, bool))
         return (alpha, info) if return_info else alpha
-    G = sparse_gram(frame, None if w is None else np.asarray(w, np.float64))
-    norms2 = G.diagonal()
+    w64 = None if w is None else np.asarray(w, np.float64)
+    Bs = frame.to_scipy(w64)  # diag(√w) B, float64 CSR (n, q)
+    norms2 = np.asarray(Bs.multiply(Bs).sum(axis=0)).ravel()
+    token = None
     if method in ("omp", "omp_error"):
-        static.pop("precompute")  # rows come from the sparse Gram matrix either way
+        static.pop("precompute")  # Gram rows come from the host either way
         static["chunk"] = max(1, min(m, _OMP_CHUNK_ELEMS // (static["n_steps"] * q)))
-        inv = np.where(norms2 > 0, 1.0 / np.sqrt(np.where(norms2 > 0, norms2, 1.0)), 0.0)
-        Gn = sp.diags(inv) @ G @ sp.diags(inv)
-        gram = _padded_rows(Gn.tocsr(), q, dtype)
+        token = _HostGramRows.register(Bs, dtype)
+        gram = jnp.asarray(token, jnp.int32)
     else:
-        gram = jnp.asarray(G.toarray(), dtype)
+        gram = jnp.asarray((Bs.T @ Bs).toarray(), dtype)
     if "eps" in dynamic:
         dynamic["eps"] = jnp.reshape(jnp.broadcast_to(jnp.asarray(dynamic["eps"], dtype), lead),
                                      (m,))
@@ -530,31 +533,52 @@ def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options)
         dynamic["init"] = jnp.reshape(jnp.asarray(dynamic["init"], dtype), (m, q))
     F = jnp.reshape(jnp.asarray(f, dtype), (m, n))
     wv = jnp.ones(n, dtype) if w is None else jnp.asarray(w, dtype)
-    alpha, info = _run_batch(_BatchEntry(True, method, tuple(sorted(static.items()))),
-                             (frame.atom_lists, wv, gram, jnp.asarray(norms2, dtype)), F, dynamic)
+    try:
+        alpha, info = _run_batch(_BatchEntry(True, method, tuple(sorted(static.items()))),
+                                 (frame.atom_lists, wv, gram, jnp.asarray(norms2, dtype)), F,
+                                 dynamic)
+        alpha = jax.block_until_ready(alpha)
+    finally:
+        if token is not None:
+            _HostGramRows.release(token)
     alpha = jnp.reshape(alpha, lead + (q,))
     if not return_info:
         return alpha
     return alpha, jax.tree.map(lambda x: jnp.reshape(x, lead), info)
 
 
-def _padded_rows(G: "sp.csr_matrix", q: int, dtype):
-    """``(cols, vals)`` ``(q, R)``: row ``j`` of ``G`` as column indices padded with ``q``."""
-    counts = np.diff(G.indptr)
-    R = max(1, int(counts.max(initial=0)))
-    slot = np.arange(G.nnz) - np.repeat(G.indptr[:-1], counts)
-    row = np.repeat(np.arange(q), counts)
-    cols = np.full((q, R), q, np.int32)
-    vals = np.zeros((q, R), np.float64)
-    cols[row, slot] = G.indices
-    vals[row, slot] = G.data
-    return jnp.asarray(cols), jnp.asarray(vals, dtype)
+class _HostGramRows:
+    """Rows ``G[k, :] = (WB)[:, k]ᵀ B`` of a sparse frame's Gram matrix, computed on the host.
+
+    A jitted kernel cannot hold scipy matrices, so each :func:`encode` call registers its
+    ``diag(√w) B`` under an integer token that the kernel passes to :func:`rows` through
+    :func:`jax.pure_callback` (the compiled kernel is shared by all frames of equal shapes).
+    """
+
+    _live: dict[int, tuple] = {}
+    _next = 0
+
+    @classmethod
+    def register(cls, Bs, dtype) -> int:
+        cls._next += 1
+        cls._live[cls._next] = (Bs.T.tocsr(), Bs.tocsr(), np.dtype(dtype))
+        return cls._next
+
+    @classmethod
+    def release(cls, token: int) -> None:
+        cls._live.pop(token, None)
+
+    @classmethod
+    def rows(cls, token, k):
+        BT, B, dtype = cls._live[int(token)]
+        k = np.asarray(k).reshape(-1)
+        return np.asarray((BT[k] @ B).toarray(), dtype)
 
 
 @partial(jax.jit, static_argnames=("method", "static"))
 def _encode_sparse_batch(lists, F, w, gram, norms2, dynamic, *, method, static):
-    """``lists`` ``(n, D)``, ``F`` ``(m, n)``, ``w`` ``(n,)``; ``gram``: ``(cols, vals)`` of the
-    normalised Gram matrix (OMP) or the dense ``BᵀWB`` (lstsq, lasso)."""
+    """``lists`` ``(n, D)``, ``F`` ``(m, n)``, ``w`` ``(n,)``; ``gram``: the host token of the
+    Gram rows (OMP, see :class:`_HostGramRows`) or the dense ``BᵀWB`` (lstsq, lasso)."""
     static = dict(static)
     m = F.shape[0]
     q = norms2.shape[0]
@@ -571,7 +595,6 @@ def _encode_sparse_batch(lists, F, w, gram, norms2, dynamic, *, method, static):
         alpha = _lstsq_gram(gram, C, lambda a: Bt(F - Bx(a)), norms2 > 0, dynamic["rcond"])
         converged = jnp.ones(m, bool)
     elif method in ("omp", "omp_error"):
-        cols, vals = gram
         if method == "omp":
             eps = jnp.full(m, -jnp.inf, F.dtype)
         elif static["eps_mode"] == "relative":
@@ -583,10 +606,10 @@ def _encode_sparse_batch(lists, F, w, gram, norms2, dynamic, *, method, static):
         valid = norms2 > 0
         inv_norm = jnp.where(valid, 1.0 / jnp.sqrt(jnp.where(valid, norms2, 1.0)), 0.0)
 
-        def gram_rows(k):  # (b,) -> (b, q) rows of DᵀD from the padded sparse rows
-            b = k.shape[0]
-            out = jnp.zeros((b, q + 1), vals.dtype)
-            return out.at[jnp.arange(b)[:, None], cols[k]].add(vals[k])[:, :q]
+        def gram_rows(k):  # (b,) -> (b, q) rows of DᵀD, from the host
+            shape = jax.ShapeDtypeStruct((k.shape[0], q), F.dtype)
+            g = jax.pure_callback(_HostGramRows.rows, shape, gram, k)
+            return g * inv_norm[k][:, None] * inv_norm[None, :]
 
         alpha, n_sel, exhausted = _omp_loop(gram_rows, inv_norm, valid, C, fnorm2, eps,
                                             static["n_steps"], static["chunk"])
