@@ -186,3 +186,25 @@ def test_faust_sparse_build_matches_dense():
     diff = got != (np.asarray(dense.atoms) > 0)
     assert diff.sum() <= 1e-6 * diff.size + 2
     assert not np.any(diff & ~_near_threshold(spec.evecs, dense.coeffs, dense.gammas))
+
+
+def test_dense_omp_host_gram_rows_match_the_gemm(pair, monkeypatch):
+    """A concrete binary frame coding a large batch takes its Gram rows from a host CSR copy
+    (precompute="auto"); the codes equal the full-Gram GEMM path."""
+    import bsfjax.coding as coding
+
+    _, _, _, dense, _, _ = pair
+    F = (np.random.default_rng(4).random((40, dense.n_vertices)) < 0.4).astype(np.float32)
+    registered = []
+    orig = coding._HostGramRows.register
+    monkeypatch.setattr(coding._HostGramRows, "register",
+                        classmethod(lambda cls, *a: registered.append(1) or orig(*a)))
+    for w in (None, "area"):
+        a_host, i_host = encode(dense, F, "omp", sparsity=6, weights=w, return_info=True)
+        a_gemm, i_gemm = encode(dense, F, "omp", sparsity=6, weights=w, precompute=True,
+                                return_info=True)
+        np.testing.assert_allclose(np.asarray(decode(dense, a_host)),
+                                   np.asarray(decode(dense, a_gemm)), rtol=1e-4, atol=1e-4)
+        np.testing.assert_allclose(np.asarray(i_host.residual), np.asarray(i_gemm.residual),
+                                   rtol=1e-5, atol=1e-5)
+    assert len(registered) == 2 and not coding._HostGramRows._live  # released after use
