@@ -19,8 +19,8 @@ blocks so that no ``(n, q)`` or ``(nnz, m)`` array is formed):
     BᵀWB       scipy CSR product on the host (exact integer counts for W = I)
 
 The atoms are built from the same band-limited kernels ``g = Φ a`` as the dense frame
-(``frame.py``) in blocks of vertices, in three passes over ``Φ`` (``max_v |g|`` per atom, the row
-counts, the lists): ``O(n k q)`` flops like the dense build, ``O(block · q + nnz)`` memory.
+(``frame.py``) in blocks of vertices, in two passes over ``Φ`` (``max_v |g|`` per atom, then the
+block masks → lists): ``O(n k q)`` flops like the dense build, ``O(block · q + nnz)`` memory.
 """
 
 from __future__ import annotations
@@ -135,46 +135,53 @@ def _column_max(evecs, coeffs, *, nb):
     return jax.lax.scan(step, m0, blocks)[0]
 
 
-def _mask(phi, coeffs, thresh, m):
+@jax.jit
+def _mask_block(phi, coeffs, thresh, m):
+    """``(nb, q)`` bool atoms of the vertex rows ``phi``: ``|g| ≥ γ · max_v |g|``."""
     g = _kernel_block(phi, coeffs)
     return (jnp.abs(g) >= thresh) & (m > 0)
-
-
-@partial(jax.jit, static_argnames="nb")
-def _row_counts(evecs, coeffs, thresh, m, *, nb):
-    blocks = _blocks(evecs, nb, 0.0)
-    counts = jax.lax.map(lambda phi: jnp.sum(_mask(phi, coeffs, thresh, m), axis=1,
-                                             dtype=jnp.int32), blocks)
-    return counts.reshape(-1)[:evecs.shape[0]]
-
-
-@partial(jax.jit, static_argnames=("nb", "width"))
-def _row_lists(evecs, coeffs, thresh, m, *, nb, width):
-    q = coeffs.shape[1]
-    blocks = _blocks(evecs, nb, 0.0)
-
-    def lists(phi):
-        mask = _mask(phi, coeffs, thresh, m)
-        return jax.vmap(lambda r: jnp.nonzero(r, size=width, fill_value=q)[0])(mask)
-
-    out = jax.lax.map(lists, blocks)
-    return out.reshape(-1, width)[:evecs.shape[0]].astype(jnp.int32)
 
 
 def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
     """``(n, D)`` atom lists of ``B = [|g| ≥ γ · max_v |g|]`` for ``g = evecs @ coeffs`` (the
     dense rule of :func:`bsfjax.frame._binarize`), never forming the ``(n, q)`` matrix.
 
-    ``evecs`` ``(n, k)``, ``coeffs`` ``(k, q)``, ``gammas`` ``(q,)``; concrete arrays (the list
-    width ``D`` is data dependent).  An all-zero frame gets ``D = 1`` (every entry ``q``).
+    Two passes over vertex blocks of ``Φ``: a jitted scan for ``max_v |g|`` per atom, then the
+    block masks, each turned into (vertex, atom) pairs on the host (``numpy.nonzero``, while
+    the device computes the next block) and assembled into the padded lists.  ``evecs``
+    ``(n, k)``, ``coeffs`` ``(k, q)``, ``gammas`` ``(q,)``; concrete arrays (``D`` is data
+    dependent).  An all-zero frame gets ``D = 1`` (every entry ``q``).
     """
     evecs, coeffs, gammas = jnp.asarray(evecs), jnp.asarray(coeffs), jnp.asarray(gammas)
     n, q = evecs.shape[0], coeffs.shape[1]
     nb = _rows_per_block(n, q)
     m = _column_max(evecs, coeffs, nb=nb)
     thresh = gammas.astype(m.dtype) * m
-    width = max(1, int(jnp.max(_row_counts(evecs, coeffs, thresh, m, nb=nb))))
-    return _row_lists(evecs, coeffs, thresh, m, nb=nb, width=width)
+    blocks = _blocks(evecs, nb, 0.0)  # equal blocks: one compilation
+    rows, cols = [], []
+
+    def collect(b, mask):
+        r, c = np.nonzero(np.asarray(mask))
+        rows.append((r + b * nb).astype(np.int64))
+        cols.append(c.astype(np.int32))
+
+    pending = None
+    for b in range(blocks.shape[0]):
+        mask = _mask_block(blocks[b], coeffs, thresh, m)  # dispatched asynchronously
+        if pending is not None:
+            collect(*pending)
+        pending = (b, mask)
+    collect(*pending)
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    keep = rows < n  # padding rows of the last block have g = 0 (never an atom, but be safe)
+    rows, cols = rows[keep], cols[keep]
+    counts = np.bincount(rows, minlength=n)
+    width = max(1, int(counts.max(initial=0)))
+    start = np.zeros(n + 1, np.int64)
+    np.cumsum(counts, out=start[1:])
+    lists = np.full((n, width), q, np.int32)
+    lists[rows, np.arange(rows.size) - start[rows]] = cols  # nonzero: row-major, sorted
+    return jnp.asarray(lists)
 
 
 # --------------------------------------------------------------------------- products
