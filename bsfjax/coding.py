@@ -573,10 +573,15 @@ def _host_rows_token(atoms, w, dtype, rows: int):
     the token, or ``None``."""
     Bh = np.asarray(atoms)
     n, q = Bh.shape
-    nnz = np.count_nonzero(Bh)
+    flat = np.flatnonzero(Bh)  # row-major: sorted by vertex, then atom
+    nnz = flat.size
     if rows * (nnz / q) * (nnz / n) * _HOST_ROW_COST >= n * q * q:
         return None
-    Bs = sp.csr_matrix(Bh, dtype=np.float64)
+    r, c = np.divmod(flat, q)
+    indptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(r, minlength=n), out=indptr[1:])
+    Bs = sp.csr_matrix((Bh.reshape(-1)[flat].astype(np.float64), c.astype(np.int32), indptr),
+                       shape=(n, q))
     if w is not None:
         Bs = sp.diags(np.sqrt(np.asarray(w, np.float64))) @ Bs
     return _HostGramRows.register(Bs, dtype)

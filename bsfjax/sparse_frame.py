@@ -158,29 +158,28 @@ def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
     m = _column_max(evecs, coeffs, nb=nb)
     thresh = gammas.astype(m.dtype) * m
     blocks = _blocks(evecs, nb, 0.0)  # equal blocks: one compilation
-    rows, cols = [], []
+    counts, cols = [], []  # per block: atoms per vertex, and the atoms (row-major, sorted)
 
-    def collect(b, mask):
+    def collect(mask):
         r, c = np.nonzero(np.asarray(mask))
-        rows.append((r + b * nb).astype(np.int64))
+        counts.append(np.bincount(r, minlength=nb).astype(np.int32))
         cols.append(c.astype(np.int32))
 
     pending = None
     for b in range(blocks.shape[0]):
         mask = _mask_block(blocks[b], coeffs, thresh, m)  # dispatched asynchronously
         if pending is not None:
-            collect(*pending)
-        pending = (b, mask)
-    collect(*pending)
-    rows, cols = np.concatenate(rows), np.concatenate(cols)
-    keep = rows < n  # padding rows of the last block have g = 0 (never an atom, but be safe)
-    rows, cols = rows[keep], cols[keep]
-    counts = np.bincount(rows, minlength=n)
-    width = max(1, int(counts.max(initial=0)))
-    start = np.zeros(n + 1, np.int64)
-    np.cumsum(counts, out=start[1:])
-    lists = np.full((n, width), q, np.int32)
-    lists[rows, np.arange(rows.size) - start[rows]] = cols  # nonzero: row-major, sorted
+            collect(pending)
+        pending = mask
+    collect(pending)
+    width = max(1, max(int(c.max(initial=0)) for c in counts))
+    lists = np.full((blocks.shape[0] * nb, width), q, np.int32)
+    for b, (cnt, c) in enumerate(zip(counts, cols)):  # fill block by block (O(block) extra)
+        r = np.repeat(np.arange(nb), cnt)
+        start = np.concatenate([[0], np.cumsum(cnt)[:-1]])
+        lists[b * nb + r, np.arange(r.size) - start[r]] = c
+        cols[b] = None
+    lists = lists[:n]
     return jnp.asarray(lists)
 
 
