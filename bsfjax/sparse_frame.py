@@ -89,6 +89,12 @@ class SparseFrame(eqx.Module):
         rows = jnp.broadcast_to(jnp.arange(n)[:, None], self.atom_lists.shape)
         return jnp.zeros((n, q + 1), dtype).at[rows, self.atom_lists].set(1)[:, :q]
 
+    def columns(self, js) -> np.ndarray:
+        """Dense 0/1 columns ``B[:, js]`` ``(n, len(js))`` (host; ``O(n · D)`` per column)."""
+        lists = np.asarray(self.atom_lists)
+        return np.stack([(lists == int(j)).any(axis=1) for j in np.atleast_1d(js)],
+                        axis=1).astype(np.float32)
+
     def to_scipy(self, weights=None) -> sp.csr_matrix:
         """``B`` (or ``diag(√w) B`` with ``weights``) as a float64 scipy CSR matrix (host)."""
         lists = np.asarray(self.atom_lists)

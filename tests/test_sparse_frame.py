@@ -93,6 +93,7 @@ def test_products_match_float64():
     np.testing.assert_allclose(sparse_gram(fr, w).toarray(), B.T @ (w[:, None] * B), rtol=1e-12)
     np.testing.assert_array_equal(np.asarray(fr.todense()), B)
     np.testing.assert_array_equal(fr.to_scipy().toarray(), B)
+    np.testing.assert_array_equal(fr.columns([3, 0, 7]), B[:, [3, 0, 7]])
 
 
 @pytest.mark.parametrize("method,opts,weights", [("omp", {"sparsity": 8}, None),
