@@ -19,8 +19,8 @@ blocks so that no ``(n, q)`` or ``(nnz, m)`` array is formed):
     BᵀWB       scipy CSR product on the host (exact integer counts for W = I)
 
 The atoms are built from the same band-limited kernels ``g = Φ a`` as the dense frame
-(``frame.py``) in blocks of vertices, in two passes over ``Φ`` (``max_v |g|`` per atom, then the
-block masks → lists): ``O(n k q)`` flops like the dense build, ``O(block · q + nnz)`` memory.
+(``frame.py``) in blocks of whole columns, in one pass over ``Φ``: ``O(n k q)`` flops like the
+dense build, ``O(n · block + nnz)`` memory.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from .errors import BSFError
 
 __all__ = ["SparseFrame", "sparse_atoms", "ell_matmul", "ell_rmatmul", "sparse_gram"]
 
-#: Vertex rows per block of the build (``block × q`` kernel values live at a time).
+#: Kernel values per column block of the build (``n × block`` live at a time).
 _BUILD_ELEMS = 2**24
 #: Elements (``rows × D × m``) gathered or scattered per block of a product.
 _PRODUCT_ELEMS = 2**22
@@ -112,10 +112,6 @@ class SparseFrame(eqx.Module):
 # --------------------------------------------------------------------------- build
 
 
-def _rows_per_block(n: int, q: int) -> int:
-    return int(max(1, min(n, _BUILD_ELEMS // max(q, 1))))
-
-
 def _blocks(x: jax.Array, nb: int, fill) -> jax.Array:
     """Pad axis 0 of ``x`` to a multiple of ``nb`` with ``fill`` and reshape to blocks."""
     pad = -x.shape[0] % nb
@@ -123,70 +119,58 @@ def _blocks(x: jax.Array, nb: int, fill) -> jax.Array:
     return x.reshape((-1, nb) + x.shape[1:])
 
 
-def _kernel_block(phi, coeffs):
-    # the same product as frame._binarize ("highest": full float32 on every backend)
-    return jnp.matmul(phi, coeffs, precision=jax.lax.Precision.HIGHEST)
-
-
-@partial(jax.jit, static_argnames="nb")
-def _column_max(evecs, coeffs, *, nb):
-    """``max_v |g_vj|`` per column of ``g = evecs @ coeffs``, by vertex blocks."""
-    blocks = _blocks(evecs, nb, 0.0)
-
-    def step(m, phi):
-        g = _kernel_block(phi, coeffs)
-        return jnp.maximum(m, jnp.maximum(jnp.max(g, axis=0), -jnp.min(g, axis=0))), None
-
-    m0 = jnp.zeros(coeffs.shape[1], coeffs.dtype)
-    return jax.lax.scan(step, m0, blocks)[0]
-
-
 @jax.jit
-def _mask_block(phi, coeffs, thresh, m):
-    """``(nb, q)`` bool atoms of the vertex rows ``phi``: ``|g| ≥ γ · max_v |g|``."""
-    g = _kernel_block(phi, coeffs)
-    return (jnp.abs(g) >= thresh) & (m > 0)
+def _mask_block(evecs, coeffs, gammas):
+    """``(n, cb)`` bool atoms of a block of whole columns: ``|g| ≥ γ · max_v |g|``, ``g = Φ a``
+    (the rule and product of ``frame._binarize``; an all-zero column gives an empty atom)."""
+    g = jnp.matmul(evecs, coeffs, precision=jax.lax.Precision.HIGHEST)
+    m = jnp.maximum(jnp.max(g, axis=0), -jnp.min(g, axis=0))
+    return (jnp.abs(g) >= gammas * m) & (m > 0)
 
 
 def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
     """``(n, D)`` atom lists of ``B = [|g| ≥ γ · max_v |g|]`` for ``g = evecs @ coeffs`` (the
     dense rule of :func:`bsfjax.frame._binarize`), never forming the ``(n, q)`` matrix.
 
-    Two passes over vertex blocks of ``Φ``: a jitted scan for ``max_v |g|`` per atom, then the
-    block masks, each turned into (vertex, atom) pairs on the host (``numpy.nonzero``, while
-    the device computes the next block) and assembled into the padded lists.  ``evecs``
+    One pass over blocks of whole columns (atoms), ``n × cb ≈ 2²⁴`` kernel values each: the
+    device computes a block's mask (and its column maxima) while the host turns the previous
+    one into (vertex, atom) pairs (``numpy.nonzero``, row-major) and appends them to each
+    vertex's list; blocks come in increasing atom order, so the lists stay sorted.  ``evecs``
     ``(n, k)``, ``coeffs`` ``(k, q)``, ``gammas`` ``(q,)``; concrete arrays (``D`` is data
     dependent).  An all-zero frame gets ``D = 1`` (every entry ``q``).
     """
     evecs, coeffs, gammas = jnp.asarray(evecs), jnp.asarray(coeffs), jnp.asarray(gammas)
     n, q = evecs.shape[0], coeffs.shape[1]
-    nb = _rows_per_block(n, q)
-    m = _column_max(evecs, coeffs, nb=nb)
-    thresh = gammas.astype(m.dtype) * m
-    blocks = _blocks(evecs, nb, 0.0)  # equal blocks: one compilation
-    counts, cols = [], []  # per block: atoms per vertex, and the atoms (row-major, sorted)
+    cb = int(max(1, min(q, _BUILD_ELEMS // max(n, 1))))
+    n_blocks = -(-q // cb)
+    pad = n_blocks * cb - q  # zero columns: empty atoms, beyond q, never stored
+    cblocks = jnp.pad(coeffs, ((0, 0), (0, pad))).T.reshape(n_blocks, cb, -1)
+    gblocks = jnp.pad(gammas.astype(coeffs.dtype), (0, pad)).reshape(n_blocks, cb)
+    lists = np.full((n, 16), q, np.int32)
+    fill = np.zeros(n, np.int64)  # entries stored per vertex so far
 
-    def collect(mask):
+    def collect(b, mask, lists):
         r, c = np.nonzero(np.asarray(mask))
-        counts.append(np.bincount(r, minlength=nb).astype(np.int32))
-        cols.append(c.astype(np.int32))
+        keep = c + b * cb < q
+        r, c = r[keep], (c[keep] + b * cb).astype(np.int32)
+        cnt = np.bincount(r, minlength=n)
+        need = int((fill + cnt).max(initial=0))
+        if need > lists.shape[1]:  # grow the padded width geometrically
+            width = max(need, int(1.5 * lists.shape[1]))
+            lists = np.pad(lists, ((0, 0), (0, width - lists.shape[1])), constant_values=q)
+        first = np.cumsum(cnt) - cnt  # index in r of each vertex's first entry
+        lists[r, fill[r] + np.arange(r.size) - first[r]] = c
+        fill[:] += cnt
+        return lists
 
     pending = None
-    for b in range(blocks.shape[0]):
-        mask = _mask_block(blocks[b], coeffs, thresh, m)  # dispatched asynchronously
+    for b in range(n_blocks):
+        mask = _mask_block(evecs, cblocks[b].T, gblocks[b])  # dispatched asynchronously
         if pending is not None:
-            collect(pending)
-        pending = mask
-    collect(pending)
-    width = max(1, max(int(c.max(initial=0)) for c in counts))
-    lists = np.full((blocks.shape[0] * nb, width), q, np.int32)
-    for b, (cnt, c) in enumerate(zip(counts, cols)):  # fill block by block (O(block) extra)
-        r = np.repeat(np.arange(nb), cnt)
-        start = np.concatenate([[0], np.cumsum(cnt)[:-1]])
-        lists[b * nb + r, np.arange(r.size) - start[r]] = c
-        cols[b] = None
-    lists = lists[:n]
-    return jnp.asarray(lists)
+            lists = collect(*pending, lists)
+        pending = (b, mask)
+    lists = collect(*pending, lists)
+    return jnp.asarray(lists[:, :max(1, int(fill.max(initial=0)))])
 
 
 # --------------------------------------------------------------------------- products

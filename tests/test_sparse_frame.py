@@ -209,3 +209,16 @@ def test_dense_omp_host_gram_rows_match_the_gemm(pair, monkeypatch):
         np.testing.assert_allclose(np.asarray(i_host.residual), np.asarray(i_gemm.residual),
                                    rtol=1e-5, atol=1e-5)
     assert len(registered) == 2 and not coding._HostGramRows._live  # released after use
+
+
+def test_build_in_many_column_blocks(pair, monkeypatch):
+    """Blocks of 7 atoms (the last one padded), lists grown past their initial width: the same
+    lists as one block."""
+    import bsfjax.sparse_frame as sf_mod
+
+    src, _, _, dense, sparse, _ = pair
+    monkeypatch.setattr(sf_mod, "_BUILD_ELEMS", 7 * src.n_vertices)
+    assert dense.n_atoms % 7 != 0
+    lists = sparse_atoms(src.evecs, dense.coeffs, dense.gammas)
+    np.testing.assert_array_equal(np.asarray(lists), np.asarray(sparse.atom_lists))
+    assert lists.shape[1] > 16  # grew beyond the initial width
