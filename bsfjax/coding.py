@@ -588,12 +588,19 @@ def _host_rows_token(atoms, w, dtype, rows: int):
 
 
 def _host_gram_rows(token, inv_norm, dtype):
-    """``gram_rows(k)`` for :func:`_omp_loop`: rows of ``DᵀD`` from the host (callback)."""
+    """``gram_rows(k)`` for :func:`_omp_loop`: rows of ``DᵀD`` from the host (callback).
+
+    The callback returns float32 (JAX canonicalizes a callback's float64 result to float32
+    when it runs in a thread outside a ``jax.enable_x64`` context); in float64 the rows come
+    as a float32 pair ``hi + lo``, exact to ~1e-14.
+    """
     q = inv_norm.shape[0]
+    wide = jnp.dtype(dtype) == jnp.float64
 
     def gram_rows(k):  # (b,) -> (b, q)
-        shape = jax.ShapeDtypeStruct((k.shape[0], q), dtype)
-        g = jax.pure_callback(_HostGramRows.rows, shape, token, k)
+        part = jax.ShapeDtypeStruct((k.shape[0], q), jnp.float32)
+        out = jax.pure_callback(_HostGramRows.rows, (part, part) if wide else part, token, k)
+        g = out[0].astype(dtype) + out[1].astype(dtype) if wide else out
         return g * inv_norm[k][:, None] * inv_norm[None, :]
 
     return gram_rows
@@ -623,8 +630,11 @@ class _HostGramRows:
     @classmethod
     def rows(cls, token, k):
         BT, B, dtype = cls._live[int(token)]
-        k = np.asarray(k).reshape(-1)
-        return np.asarray((BT[k] @ B).toarray(), dtype)
+        g = (BT[np.asarray(k).reshape(-1)] @ B).toarray()
+        hi = g.astype(np.float32)
+        if dtype != np.float64:
+            return hi
+        return hi, (g - hi).astype(np.float32)
 
 
 @partial(jax.jit, static_argnames=("method", "static"))

@@ -222,3 +222,20 @@ def test_build_in_many_column_blocks(pair, monkeypatch):
     lists = sparse_atoms(src.evecs, dense.coeffs, dense.gammas)
     np.testing.assert_array_equal(np.asarray(lists), np.asarray(sparse.atom_lists))
     assert lists.shape[1] > 16  # grew beyond the initial width
+
+
+def test_host_gram_rows_in_float64(pair):
+    """Under jax_enable_x64 the host rows keep float64 accuracy (weighted Gram rows are not
+    integers): sparse, dense-host and dense-GEMM OMP agree to 1e-10."""
+    _, _, _, _, sparse, _ = pair
+    with jax.enable_x64(True):
+        s64 = jax.tree.map(lambda x: jnp.asarray(np.asarray(x)), sparse)
+        d64 = bsfjax.Frame(atoms=s64.todense(jnp.float64), coeffs=s64.coeffs, taus=s64.taus,
+                           centers=s64.centers, mass=jnp.asarray(np.asarray(sparse.mass), jnp.float64))
+        F = (np.random.default_rng(6).random((40, sparse.n_vertices)) < 0.4).astype(np.float64)
+        res = [np.asarray(encode(fr, F, "omp", sparsity=6, weights="area", return_info=True,
+                                 **opts)[1].residual)
+               for fr, opts in ((s64, {}), (d64, {}), (d64, {"precompute": True}))]
+        assert res[0].dtype == np.float64
+        np.testing.assert_allclose(res[0], res[2], rtol=1e-10)
+        np.testing.assert_allclose(res[1], res[2], rtol=1e-10)
