@@ -10,8 +10,8 @@ vertex ``v``, the sorted list of atoms that contain it, padded with ``q`` to a c
     atom_lists[v, d] = j_d(v)  (j_1 < j_2 < … , then q … q)       B_vj = 1  ⇔  j ∈ atom_lists[v]
 
 On real meshes ``D`` is close to the mean row count (each vertex is covered by about the same
-number of atoms; max/mean ≈ 1.3 on the TOSCA cat, ≈ 2 on FAUST), so the padding wastes little, whereas per-atom
-lists would pad every atom to the largest one (10× the mean).  Products (chunked over vertex
+number of atoms; max/mean ≈ 1.3 on the TOSCA cat, ≈ 2 on FAUST), so the padding wastes
+little, whereas per-atom lists would pad every atom to the largest one (10× the mean).  Products (chunked over vertex
 blocks so that no ``(n, q)`` or ``(nnz, m)`` array is formed):
 
     (B X)_v   = Σ_d X[j_d(v)]                 gather-sum    (X ``(q, m)``)
