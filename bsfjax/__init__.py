@@ -18,6 +18,7 @@ from .mesh import Mesh, MeshReport, load_mesh, mesh_report, save_mesh
 from .example import ExamplePair, example_mesh, example_pair
 from .spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_operators
 from .sampling import farthest_point_sampling
+from .sparse_frame import SparseFrame
 from .frame import (Frame, adaptive_taus, build_frame, prune_frame, transfer_frame,
                     unique_atoms)
 from .coding import CodingInfo, decode, encode
@@ -64,6 +65,7 @@ __all__ = [
     "example_pair",
     "BSFError",
     "Frame",
+    "SparseFrame",
     "build_frame",
     "farthest_point_sampling",
     "transfer_frame",

@@ -147,7 +147,7 @@ def run_demo(out_dir: str | Path | None = "bsfjax-demo", *, levels: int = 3, k: 
     results = {
         "example": {"n_vertices": n, "n_faces": src.n_faces, "labels": list(pair.label_names)},
         "settings": {"k": k, "k_refine": k_refine, "n_bsf": int(len(centers)),
-                     "n_atoms": int(frame.atoms.shape[1]), "taus": [1e-3, 5e-3, 1e-2], "gamma": 0.75,
+                     "n_atoms": frame.n_atoms, "taus": [1e-3, 5e-3, 1e-2], "gamma": 0.75,
                      "omp_sparsity": 10, "n_functions": n_functions, "seed": seed,
                      "landmarks": lm.tolist()},
         "map_geodesic_error": map_error,
@@ -175,6 +175,7 @@ def _argmax_labels(values: np.ndarray, threshold: float = 0.5) -> tuple[np.ndarr
 
 def _figures(out: Path, pair, frame, centers, F, gt, outputs, timer) -> list[str]:
     from . import plot
+    from .sparse_frame import SparseFrame
 
     names = pair.label_names
     files = {}
@@ -205,7 +206,9 @@ def _figures(out: Path, pair, frame, centers, F, gt, outputs, timer) -> list[str
                  np.asarray(res.transferred[j]), title=f"|error| of the {method} transfer", vmax=1.0)
         c = 0
         n_c = len(centers)
-        cols = np.asarray(frame.atoms)[:, [c + s * n_c for s in range(3)]]
+        js = [c + s * n_c for s in range(3)]
+        cols = (frame.atom_columns(js) if isinstance(frame, SparseFrame)
+                else np.asarray(frame.atoms)[:, js])
         save("atoms.png", plot.plot_atoms, pair.source, cols, [1e-3, 5e-3, 1e-2], center=int(centers[c]))
 
     timer("figures", draw)

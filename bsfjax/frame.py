@@ -1,7 +1,10 @@
 """The Binary Sparse Frame (paper Sec. 4, Algorithm 1) and its transfer by a functional map.
 
 Owner of: ``Frame``, ``build_frame``, ``transfer_frame``, ``adaptive_taus``, ``unique_atoms``,
-``prune_frame``.
+``prune_frame``.  With ``sparse=True`` (or automatically when the dense ``(n, q)`` atoms would
+exceed :data:`DENSE_BUDGET_BYTES`) ``build_frame`` and ``transfer_frame`` return a
+:class:`bsfjax.SparseFrame` (per-vertex atom lists, ``sparse_frame.py``) built without ever
+forming the dense matrix; its atoms are the same.
 
 Build (Algorithm 1).  For every scale τ and centre x, the band-limited heat kernel
 
@@ -36,10 +39,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from .errors import BSFError
+from .sparse_frame import SparseFrame, sparse_atoms
 from .spectrum import Spectrum
 
 __all__ = ["Frame", "build_frame", "transfer_frame", "adaptive_taus", "prune_frame",
-           "unique_atoms", "TAU_CONVENTIONS", "ADAPTIVE_AREA_RANGE", "ADAPTIVE_N_SCALES"]
+           "unique_atoms", "TAU_CONVENTIONS", "ADAPTIVE_AREA_RANGE", "ADAPTIVE_N_SCALES",
+           "DENSE_BUDGET_BYTES"]
+
+#: ``sparse=None`` builds a :class:`~bsfjax.SparseFrame` when the dense atoms (``n · q`` entries
+#: of the float dtype) would take more than this many bytes.
+DENSE_BUDGET_BYTES = 2**31
 
 #: ``"unit_area"``: τ acts on the eigenvalues of the shape rescaled to unit area (λ · area);
 #: ``"raw"``: τ acts on the eigenvalues as they are (the paper's formula).
@@ -122,6 +131,18 @@ def _binarize(evecs: jax.Array, coeffs: jax.Array, gammas: jax.Array) -> jax.Arr
     return ((jnp.abs(g) >= gammas * m) & (m > 0)).astype(g.dtype)
 
 
+def _coeffs(evals, evecs, mass, centers, taus, unit_area: bool):
+    """``(k, S·C)`` coefficients ĝ_s ⊙ Φ[x_c, :], scale-major."""
+    k = evals.shape[0]
+    taus_eff = taus * jnp.sum(mass) if unit_area else taus
+    ghat = jnp.exp(-taus_eff[:, None] * (evals - evals[0])[None, :])  # (S, k)
+    rows = evecs[centers]  # (C, k): Φ[x, :] of every centre
+    return (ghat[:, None, :] * rows[None, :, :]).reshape(-1, k).T  # (k, S·C)
+
+
+_coeffs_jit = jax.jit(_coeffs, static_argnames="unit_area")
+
+
 @functools.partial(jax.jit, static_argnames="unit_area")
 def _build_core(evals: jax.Array, evecs: jax.Array, mass: jax.Array, centers: jax.Array,
                 taus: jax.Array, gammas: jax.Array, unit_area: bool):
@@ -130,13 +151,14 @@ def _build_core(evals: jax.Array, evecs: jax.Array, mass: jax.Array, centers: ja
     Shapes: evals ``(k,)``, evecs ``(n, k)``, mass ``(n,)``, centers ``(C,)``, taus ``(S,)``,
     gammas ``(S,)``.  Returns atoms ``(n, S·C)`` and coeffs ``(k, S·C)``, scale-major.
     """
-    k = evals.shape[0]
-    taus_eff = taus * jnp.sum(mass) if unit_area else taus
-    ghat = jnp.exp(-taus_eff[:, None] * (evals - evals[0])[None, :])  # (S, k)
-    rows = evecs[centers]  # (C, k): Φ[x, :] of every centre
-    coeffs = (ghat[:, None, :] * rows[None, :, :]).reshape(-1, k).T  # (k, S·C)
+    coeffs = _coeffs(evals, evecs, mass, centers, taus, unit_area)
     gcols = jnp.repeat(gammas, centers.shape[0])  # (S·C,)
     return _binarize(evecs, coeffs, gcols), coeffs
+
+
+@jax.jit
+def _transfer_coeffs(C: jax.Array, coeffs: jax.Array) -> jax.Array:
+    return jnp.matmul(C, coeffs[:C.shape[1]], precision=jax.lax.Precision.HIGHEST)
 
 
 @jax.jit
@@ -275,11 +297,27 @@ def _check_gammas(gamma, n_scales: int) -> np.ndarray:
     return g
 
 
+def _want_sparse(sparse, n: int, q: int, dtype) -> bool:
+    if sparse is None:
+        return n * q * np.dtype(dtype).itemsize > DENSE_BUDGET_BYTES
+    if not isinstance(sparse, (bool, np.bool_)):
+        raise BSFError(f"sparse must be None (automatic), True or False, got {sparse!r}")
+    return bool(sparse)
+
+
+def _check_sparse_concrete(*arrays) -> None:
+    if not all(_concrete(a) for a in arrays):
+        raise BSFError("sparse=True needs concrete inputs (the atom-list width is data "
+                       "dependent): call build_frame/transfer_frame outside jit/vmap, or pass "
+                       "sparse=False there")
+
+
 # --------------------------------------------------------------------------- public API
 
 
 def build_frame(spectrum: Spectrum, centers, taus=(1e-3, 5e-3, 1e-2), gamma=0.75,
-                tau_convention: str = "unit_area", *, prune: bool = False) -> Frame:
+                tau_convention: str = "unit_area", *, prune: bool = False,
+                sparse: bool | None = None):
     """The Binary Sparse Frame of paper Algorithm 1, every centre and scale in one jitted call.
 
     For each scale ``τ_s`` and centre ``x_c`` (column ``j = s · n_centers + c``)::
@@ -307,9 +345,14 @@ def build_frame(spectrum: Spectrum, centers, taus=(1e-3, 5e-3, 1e-2), gamma=0.75
         prune: drop empty and duplicate atoms (:func:`prune_frame`; ``Frame.columns`` then
             says which built columns remain).  Needs concrete (non-traced) inputs.  Default
             ``False``: the paper's frame, every column kept.
+        sparse: ``True``: return a :class:`~bsfjax.SparseFrame` (per-vertex atom lists, built
+            in vertex blocks, O(nnz) memory; needs concrete inputs); ``False``: a dense
+            :class:`Frame`; ``None`` (default): sparse when the dense atoms would exceed
+            :data:`DENSE_BUDGET_BYTES` (2 GiB), e.g. ~48K vertices at 5 % × 3 scales.
 
     Returns:
-        A :class:`Frame` with ``q = S · n_centers`` columns: atoms ``(n, q)`` and coeffs
+        A :class:`Frame` (or :class:`~bsfjax.SparseFrame`, same atoms) with
+        ``q = S · n_centers`` columns: atoms ``(n, q)`` and coeffs
         ``(k, q)`` in JAX's default float dtype, ``taus``/``gammas``/``centers`` per column as
         given, ``mass = spectrum.mass`` and the ``tau_convention``.
 
@@ -336,11 +379,26 @@ def build_frame(spectrum: Spectrum, centers, taus=(1e-3, 5e-3, 1e-2), gamma=0.75
     else:
         t = _check_taus(taus)
         g = _check_gammas(gamma, t.size)
+    n_c = c.shape[0]
+    n_s = int(np.shape(t)[0])
+    dtype = jax.dtypes.canonicalize_dtype(jnp.float64)
+    if _want_sparse(sparse, n, n_s * n_c, dtype):
+        if prune:
+            raise BSFError("prune=True works on dense frames only; pass sparse=False (or prune "
+                           "the codes' frame after building it dense)")
+        _check_sparse_concrete(spectrum.evals, spectrum.evecs, spectrum.mass, c, t)
+        evecs = jnp.asarray(spectrum.evecs, dtype)
+        coeffs = _coeffs_jit(jnp.asarray(spectrum.evals, dtype), evecs,
+                             jnp.asarray(spectrum.mass, dtype), jnp.asarray(c), jnp.asarray(t, dtype),
+                             tau_convention == "unit_area")
+        gcols = jnp.repeat(jnp.asarray(g, dtype), n_c)
+        return SparseFrame(atom_lists=sparse_atoms(evecs, coeffs, gcols), coeffs=coeffs,
+                           taus=jnp.repeat(jnp.asarray(t), n_c), centers=jnp.tile(jnp.asarray(c), n_s),
+                           mass=jnp.asarray(spectrum.mass), gammas=gcols,
+                           tau_convention=tau_convention)
     atoms, coeffs = _build_core(jnp.asarray(spectrum.evals), jnp.asarray(spectrum.evecs),
                                 jnp.asarray(spectrum.mass), jnp.asarray(c), jnp.asarray(t),
                                 jnp.asarray(g), tau_convention == "unit_area")
-    n_c = c.shape[0]
-    n_s = int(np.shape(t)[0])
     frame = Frame(atoms=atoms, coeffs=coeffs, taus=jnp.repeat(jnp.asarray(t), n_c),
                   centers=jnp.tile(jnp.asarray(c), n_s), mass=jnp.asarray(spectrum.mass),
                   gammas=jnp.repeat(jnp.asarray(g), n_c), tau_convention=tau_convention)
@@ -483,7 +541,7 @@ def prune_frame(frame: Frame, alpha=None):
     return out, jnp.moveaxis(merged, 0, -1)
 
 
-def transfer_frame(frame: Frame, C, target_spectrum: Spectrum, *, p2p=None) -> Frame:
+def transfer_frame(frame, C, target_spectrum: Spectrum, *, p2p=None, sparse: bool | None = None):
     """Carry a frame from shape ``M`` to shape ``N`` through a functional map (Eq. 11–12).
 
     With ``C`` ``(k_N, k_M)`` mapping coefficient vectors on ``M`` to ``N``::
@@ -511,14 +569,16 @@ def transfer_frame(frame: Frame, C, target_spectrum: Spectrum, *, p2p=None) -> F
         C: ``(k_N, k_M)`` functional map, ``M → N`` on coefficients.
         target_spectrum: eigenpairs of ``N`` with at least ``k_N`` of them (the first ``k_N``
             are used).
+        sparse: ``None`` (default): the kind of ``frame`` (a :class:`~bsfjax.SparseFrame` gives
+            a sparse result, built in vertex blocks); ``True``/``False`` to choose.
 
     Returns:
         A :class:`Frame` on ``N``: atoms ``(n_N, q)``, coeffs ``a_N`` ``(k_N, q)``,
         ``mass = target_spectrum.mass``; ``taus``, ``gammas``, ``tau_convention`` and
         ``centers`` are the source's — ``centers`` still index vertices of ``M``.
     """
-    if not isinstance(frame, Frame):
-        raise BSFError(f"frame must be a bsfjax.Frame, got {type(frame).__name__}")
+    if not isinstance(frame, (Frame, SparseFrame)):
+        raise BSFError(f"frame must be a bsfjax.Frame or SparseFrame, got {type(frame).__name__}")
     if frame.gammas is None:
         raise BSFError("frame has no gammas (hand-made Frame?): transfer_frame thresholds with "
                        "frame.gammas, so build the frame with build_frame")
@@ -538,9 +598,13 @@ def transfer_frame(frame: Frame, C, target_spectrum: Spectrum, *, p2p=None) -> F
                        "eigenpairs")
     if _concrete(C) and not np.isfinite(np.asarray(C)).all():
         raise BSFError("C contains NaN or inf")
-    atoms, coeffs = _transfer_core(jnp.asarray(C), frame.coeffs, jnp.asarray(target_spectrum.evecs),
-                                   frame.gammas)
+    if sparse is None:
+        sparse = isinstance(frame, SparseFrame)
+    sparse = _want_sparse(sparse, 0, 0, np.float32)
     if p2p is not None:
+        if sparse or isinstance(frame, SparseFrame):
+            raise BSFError("transfer_frame(p2p=...) pulls back dense atoms: use a dense Frame "
+                           "and sparse=False")
         n_n, n_m = int(np.shape(target_spectrum.evecs)[0]), frame.n_vertices
         if not hasattr(p2p, "shape"):
             p2p = np.asarray(p2p)
@@ -549,7 +613,19 @@ def transfer_frame(frame: Frame, C, target_spectrum: Spectrum, *, p2p=None) -> F
                            f"target vertex), got {p2p.dtype}{tuple(p2p.shape)}")
         if _concrete(p2p) and (np.min(p2p) < 0 or np.max(p2p) >= n_m):
             raise BSFError(f"p2p must hold source vertex indices in [0, {n_m})")
+    if sparse:
+        _check_sparse_concrete(C, frame.coeffs, frame.gammas, target_spectrum.evecs)
+        dtype = jax.dtypes.canonicalize_dtype(jnp.float64)
+        coeffs = _transfer_coeffs(jnp.asarray(C, dtype), jnp.asarray(frame.coeffs, dtype))
+        evecs = jnp.asarray(target_spectrum.evecs, dtype)[:, :k_n]
+        return SparseFrame(atom_lists=sparse_atoms(evecs, coeffs, frame.gammas), coeffs=coeffs,
+                           taus=frame.taus, centers=frame.centers,
+                           mass=jnp.asarray(target_spectrum.mass), gammas=frame.gammas,
+                           tau_convention=frame.tau_convention)
+    atoms, coeffs = _transfer_core(jnp.asarray(C), frame.coeffs, jnp.asarray(target_spectrum.evecs),
+                                   frame.gammas)
+    if p2p is not None:
         atoms = jnp.asarray(frame.atoms)[p2p]
     return Frame(atoms=atoms, coeffs=coeffs, taus=frame.taus, centers=frame.centers,
                  mass=jnp.asarray(target_spectrum.mass), gammas=frame.gammas,
-                 tau_convention=frame.tau_convention, columns=frame.columns)
+                 tau_convention=frame.tau_convention, columns=getattr(frame, "columns", None))

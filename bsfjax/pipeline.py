@@ -14,10 +14,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._devices import pad_leading, shard_leading
 from ._validate import check_finite
 from .coding import decode, encode
 from .errors import BSFError
 from .frame import Frame, build_frame, transfer_frame
+from .sparse_frame import SparseFrame
 from .spectrum import Spectrum
 
 __all__ = ["approximate", "transfer", "PairResult", "transfer_pairs", "stack_spectra"]
@@ -39,9 +41,10 @@ def transfer(frame: Frame, target_frame: Frame, f, method: str = "omp", **option
     ``f_N = B_N α`` with ``α = encode(frame, f)``.  Returns ``(..., n_N)``.
     """
     for name, fr in (("frame", frame), ("target_frame", target_frame)):
-        if not isinstance(fr, Frame):
-            raise BSFError(f"{name} must be a bsfjax.Frame, got {type(fr).__name__}")
-    q_m, q_n = frame.atoms.shape[-1], target_frame.atoms.shape[-1]
+        if not isinstance(fr, (Frame, SparseFrame)):
+            raise BSFError(f"{name} must be a bsfjax.Frame or SparseFrame, got "
+                           f"{type(fr).__name__}")
+    q_m, q_n = frame.n_atoms, target_frame.n_atoms
     if q_m != q_n:
         raise BSFError(f"target_frame has {q_n} atoms but frame has {q_m}: target_frame must be "
                        "transfer_frame(frame, C, target_spectrum)")
@@ -71,7 +74,7 @@ def stack_spectra(spectra: Sequence[Spectrum]) -> Spectrum:
 @partial(jax.jit, static_argnames=("taus", "gammas", "method", "options", "tau_convention"))
 def _pairs_kernel(source, target, C, centers, F, *, taus, gammas, method, options, tau_convention):
     def one(src, tgt, c, ctr, f):
-        frame = build_frame(src, ctr, taus, gammas, tau_convention=tau_convention)
+        frame = build_frame(src, ctr, taus, gammas, tau_convention=tau_convention, sparse=False)
         tframe = transfer_frame(frame, c, tgt)
         alpha = encode(frame, f, method, **dict(options))
         return PairResult(alpha, decode(frame, alpha), decode(tframe, alpha))
@@ -104,7 +107,8 @@ def transfer_pairs(sources: Spectrum | Sequence[Spectrum], targets: Spectrum | S
     With several JAX devices (GPUs, or CPU devices from
     ``XLA_FLAGS=--xla_force_host_platform_device_count=N``) the pair axis is sharded across them
     automatically (``jax.sharding``, a 1-D device mesh named ``"pairs"``): no code change, same
-    results.
+    results.  (:func:`bsfjax.encode`, and so :func:`approximate` and :func:`transfer`, split
+    the function axis of a batch over the devices the same way.)
     """
     src = stack_spectra(sources) if not isinstance(sources, Spectrum) else sources
     tgt = stack_spectra(targets) if not isinstance(targets, Spectrum) else targets
@@ -131,7 +135,8 @@ def transfer_pairs(sources: Spectrum | Sequence[Spectrum], targets: Spectrum | S
                        f"[{centers.min()}, {centers.max()}]")
     # run the Python-side validation of the stages once on the first pair (concrete values)
     first = jax.tree.map(lambda x: x[0], src)
-    frame0 = build_frame(first, centers[0], taus, gamma, tau_convention=tau_convention)
+    frame0 = build_frame(first, centers[0], taus, gamma, tau_convention=tau_convention,
+                         sparse=False)
     encode(frame0.atoms, f[0, :1], method, **options)
     n_c = centers.shape[1]
     # per-scale τ and γ as static tuples (build_frame validates concrete values)
@@ -154,18 +159,5 @@ def _shard_pairs(args, devices):
     device computes whole pairs, which keeps results identical to a single-device run.  Padding
     repeats the last pair and is sliced off by the caller.
     """
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
-
     d = len(devices)
-    P = np.shape(args[2])[0]
-    pad = (-P) % d
-
-    def place(x):
-        x = jnp.asarray(x)
-        if pad:
-            x = jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)], axis=0)
-        spec = PartitionSpec("pairs", *([None] * (x.ndim - 1)))
-        return jax.device_put(x, NamedSharding(mesh, spec))
-
-    mesh = Mesh(np.asarray(devices), ("pairs",))
-    return jax.tree.map(place, args)
+    return jax.tree.map(lambda x: shard_leading(pad_leading(x, d, "edge"), "pairs"), args)

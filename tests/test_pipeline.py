@@ -95,19 +95,45 @@ def test_transfer_pairs_validates(pairs):
 SHARDED = textwrap.dedent("""
     import numpy as np, jax, sys
     sys.path.insert(0, {root!r})
-    from tests.test_pipeline import _pairs, _inputs
-    from bsfjax.pipeline import transfer_pairs
+    from tests.test_pipeline import _pairs, _inputs, _function_batch
+    from bsfjax.pipeline import transfer_pairs, _pairs_kernel
     assert jax.device_count() == 4, jax.devices()
     src, tgt, n = _pairs()
     C, centers, F = _inputs(src, tgt, n)
     out = transfer_pairs(src, tgt, C, centers, F, method="omp", sparsity=6)
-    assert len(out.alpha.sharding.device_set) >= 1
-    np.savez({path!r}, alpha=np.asarray(out.alpha), transferred=np.asarray(out.transferred))
+    np.savez({path!r}, alpha=np.asarray(out.alpha), transferred=np.asarray(out.transferred),
+             devices=len(out.alpha.sharding.device_set), **_function_batch(src[0]))
 """)
 
 
+def _function_batch(spec):
+    """OMP codes of 7 functions (not a multiple of 4: padded) in a sparse and a dense frame, a
+    least-squares approximation, and whether encode took the multi-device path."""
+    import bsfjax.coding as coding
+
+    centers = np.arange(0, spec.n_vertices, 9)
+    F = (np.random.default_rng(5).random((7, spec.n_vertices)) < 0.3).astype(np.float32)
+    out = {}
+    for kind in ("sparse", "dense"):
+        frame = bsfjax.build_frame(spec, centers, sparse=kind == "sparse")
+        a, info = bsfjax.encode(frame, F, "omp", weights="area", return_info=True)
+        out[f"{kind}_omp"] = np.asarray(a)
+        out[f"{kind}_omp_res"] = np.asarray(info.residual)
+    out["dense_approx"] = np.asarray(bsfjax.approximate(frame, F, "lstsq"))
+    seen = []
+    orig = coding.map_over_devices
+    coding.map_over_devices = lambda *a: seen.append(1) or orig(*a)
+    try:
+        bsfjax.encode(frame, F, "omp", weights="area")
+    finally:
+        coding.map_over_devices = orig
+    out["encode_sharded"] = np.asarray(len(seen))
+    return out
+
+
 def test_four_cpu_devices_give_identical_results(pairs, tmp_path):
-    """Sharding the pair axis over 4 forced host devices (3 pairs: padded to 4) changes nothing."""
+    """Sharding the pair axis (3 pairs: padded to 4) and the function axis of encode (7
+    functions: padded to 8) over 4 forced host devices changes nothing."""
     src, tgt, n = pairs
     C, centers, F = _inputs(src, tgt, n)
     single = transfer_pairs(src, tgt, C, centers, F, method="omp", sparsity=6)
@@ -117,6 +143,16 @@ def test_four_cpu_devices_give_identical_results(pairs, tmp_path):
     r = subprocess.run([sys.executable, "-c", SHARDED.format(root=root, path=str(path))], env=env,
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
+    ref = _function_batch(src[0])
+    assert int(ref["encode_sharded"]) == 0  # one device here: the plain path
     with np.load(path) as z:
-        np.testing.assert_allclose(z["alpha"], np.asarray(single.alpha), rtol=1e-6, atol=1e-6)
+        assert int(z["devices"]) == 4 and int(z["encode_sharded"]) == 1
+        np.testing.assert_array_equal(z["alpha"], np.asarray(single.alpha))
         np.testing.assert_allclose(z["transferred"], np.asarray(single.transferred), rtol=1e-6, atol=1e-6)
+        for key, value in ref.items():
+            if key == "encode_sharded":
+                continue
+            if key.endswith("_omp"):  # the codes themselves: bit for bit
+                np.testing.assert_array_equal(z[key], value, err_msg=key)
+            else:  # residuals / approximations: XLA may round a batched product differently
+                np.testing.assert_allclose(z[key], value, rtol=1e-6, atol=1e-6, err_msg=key)

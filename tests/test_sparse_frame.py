@@ -1,0 +1,262 @@
+"""Sparse frames (per-vertex atom lists): same atoms, codes and transfers as the dense path."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import bsfjax
+from bsfjax import BSFError, SparseFrame, build_frame, decode, encode, transfer_frame
+from bsfjax import frame as frame_mod
+from bsfjax.sparse_frame import ell_matmul, ell_rmatmul, sparse_atoms, sparse_gram
+
+from .conftest import data_path, icosphere
+
+TAUS = (1e-3, 5e-3, 1e-2)
+
+
+def _shape(seed, k=30):
+    v, f = icosphere(3)
+    bump = 1 + 0.15 * np.sin(v @ np.random.default_rng(seed).normal(size=3) * 2.0)
+    return bsfjax.spectrum(bsfjax.Mesh(v * bump[:, None], f), k)
+
+
+@pytest.fixture(scope="module")
+def pair():
+    src, tgt = _shape(0), _shape(1)
+    n = src.n_vertices
+    centers = np.arange(0, n, 7)
+    dense = build_frame(src, centers, TAUS, (0.7, 0.75, 0.8))
+    sparse = build_frame(src, centers, TAUS, (0.7, 0.75, 0.8), sparse=True)
+    C = np.asarray(bsfjax.fmap_from_p2p(src, tgt, np.arange(n)))
+    return src, tgt, centers, dense, sparse, C
+
+
+def _near_threshold(evecs, coeffs, gammas, tol=1e-4):
+    """Entries whose float64 |g|/max|g| lies within ``tol`` of γ (float32 may round either way)."""
+    g = np.abs(np.asarray(evecs, np.float64) @ np.asarray(coeffs, np.float64))
+    m = g.max(axis=0)
+    return np.abs(g / np.where(m > 0, m, 1) - np.asarray(gammas)) < tol
+
+
+def test_sparse_build_has_the_dense_atoms(pair):
+    src, _, centers, dense, sparse, _ = pair
+    assert isinstance(sparse, SparseFrame) and isinstance(dense, bsfjax.Frame)
+    B = np.asarray(dense.atoms)
+    diff = np.asarray(sparse.todense()) != B
+    assert not np.any(diff & ~_near_threshold(src.evecs, dense.coeffs, dense.gammas))
+    assert diff.sum() <= 2
+    np.testing.assert_array_equal(np.asarray(sparse.coeffs), np.asarray(dense.coeffs))
+    for name in ("taus", "centers", "gammas", "mass"):
+        np.testing.assert_array_equal(np.asarray(getattr(sparse, name)),
+                                      np.asarray(getattr(dense, name)))
+    assert sparse.n_atoms == dense.n_atoms and sparse.n_vertices == dense.n_vertices
+    assert sparse.nnz == int(np.asarray(sparse.todense()).sum())
+    lists = np.asarray(sparse.atom_lists)  # sorted, padded with q, width = max row count
+    assert lists.shape[1] == int(np.asarray(sparse.todense()).sum(axis=1).max())
+    assert np.all((np.diff(lists, axis=1) > 0) | (lists[:, 1:] == sparse.n_atoms))
+
+
+def test_sparse_transfer_matches_dense(pair):
+    _, tgt, _, dense, sparse, C = pair
+    td = transfer_frame(dense, C, tgt)
+    ts = transfer_frame(sparse, C, tgt)
+    assert isinstance(ts, SparseFrame) and isinstance(transfer_frame(sparse, C, tgt, sparse=False),
+                                                      bsfjax.Frame)
+    diff = np.asarray(ts.todense()) != np.asarray(td.atoms)
+    assert not np.any(diff & ~_near_threshold(tgt.evecs, td.coeffs, td.gammas))
+    np.testing.assert_allclose(np.asarray(ts.coeffs), np.asarray(td.coeffs), rtol=1e-6, atol=1e-7)
+    # a map that kills every kernel gives empty atoms (no NaN), as in the dense path
+    zero = transfer_frame(sparse, np.zeros_like(C), tgt)
+    assert zero.nnz == 0 and zero.atom_lists.shape[1] == 1
+
+
+def test_products_match_float64():
+    rng = np.random.default_rng(0)
+    n, q = 57, 23
+    B = rng.random((n, q)) < 0.2
+    B[:, 3] = False  # an empty atom
+    B[5] = False  # a vertex in no atom
+    width = int(B.sum(axis=1).max())
+    lists = np.stack([np.concatenate([np.flatnonzero(r), np.full(width - r.sum(), q)]) for r in B])
+    fr = SparseFrame(atom_lists=jnp.asarray(lists, jnp.int32), coeffs=jnp.zeros((4, q)),
+                     taus=jnp.ones(q), centers=jnp.zeros(q, jnp.int32), mass=jnp.ones(n))
+    X, Y = rng.normal(size=(q, 3)), rng.normal(size=(n, 3))
+    np.testing.assert_allclose(np.asarray(ell_matmul(fr.atom_lists, jnp.asarray(X, jnp.float32))),
+                               B @ X, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(np.asarray(ell_rmatmul(fr.atom_lists, jnp.asarray(Y, jnp.float32), q)),
+                               B.T @ Y, rtol=1e-5, atol=1e-5)
+    w = rng.random(n)
+    np.testing.assert_array_equal(sparse_gram(fr).toarray(), B.T.astype(float) @ B)
+    np.testing.assert_allclose(sparse_gram(fr, w).toarray(), B.T @ (w[:, None] * B), rtol=1e-12)
+    np.testing.assert_array_equal(np.asarray(fr.todense()), B)
+    np.testing.assert_array_equal(fr.to_scipy().toarray(), B)
+    np.testing.assert_array_equal(fr.atom_columns([3, 0, 7]), B[:, [3, 0, 7]])
+
+
+@pytest.mark.parametrize("method,opts,weights", [("omp", {"sparsity": 8}, None),
+                                                 ("omp_error", {}, "area"),
+                                                 ("lstsq", {}, "area"),
+                                                 ("lasso", {"lam": 0.02}, None)])
+def test_encode_matches_dense_path(pair, method, opts, weights):
+    _, _, _, _, sparse, _ = pair
+    dense = bsfjax.Frame(atoms=sparse.todense(jnp.float32), coeffs=sparse.coeffs, taus=sparse.taus,
+                         centers=sparse.centers, mass=sparse.mass, gammas=sparse.gammas)
+    n = sparse.n_vertices
+    F = (np.random.default_rng(2).random((2, 3, n)) < 0.4).astype(np.float32)
+    a_d, i_d = encode(dense, F, method, weights=weights, return_info=True, **opts)
+    a_s, i_s = encode(sparse, F, method, weights=weights, return_info=True, **opts)
+    assert a_s.shape == (2, 3, sparse.n_atoms)
+    if method == "lstsq":  # the minimum-norm solution of a rank-deficient B: compare in float64
+        with jax.enable_x64(True):
+            d64 = bsfjax.Frame(atoms=jnp.asarray(np.asarray(dense.atoms), jnp.float64),
+                               coeffs=dense.coeffs, taus=dense.taus, centers=dense.centers,
+                               mass=jnp.asarray(np.asarray(dense.mass), jnp.float64))
+            s64 = jax.tree.map(lambda x: jnp.asarray(np.asarray(x)), sparse)
+            F64 = F.astype(np.float64)
+            np.testing.assert_allclose(np.asarray(encode(s64, F64, method, weights=weights)),
+                                       np.asarray(encode(d64, F64, method, weights=weights)),
+                                       rtol=1e-8, atol=1e-9)
+    if method == "lasso":  # FISTA stops at tol: iterates differ a little
+        np.testing.assert_allclose(np.asarray(a_s), np.asarray(a_d), rtol=1e-4, atol=1e-3)
+    else:  # OMP: binary frames have duplicate atoms, and rounding may pick the other twin
+        np.testing.assert_array_equal(np.asarray(i_s.n_atoms), np.asarray(i_d.n_atoms))
+        np.testing.assert_array_equal(np.asarray(i_s.converged), np.asarray(i_d.converged))
+    np.testing.assert_allclose(np.asarray(decode(sparse, a_s)), np.asarray(decode(dense, a_d)),
+                               rtol=1e-4, atol=2e-4)
+    np.testing.assert_allclose(np.asarray(i_s.residual), np.asarray(i_d.residual), rtol=1e-4,
+                               atol=1e-4)
+    np.testing.assert_allclose(np.asarray(decode(sparse, a_d)), np.asarray(decode(dense, a_d)),
+                               rtol=1e-5, atol=1e-5)
+
+
+def test_pipeline_helpers_accept_sparse_frames(pair):
+    src, tgt, _, dense, sparse, C = pair
+    F = (np.random.default_rng(3).random((4, src.n_vertices)) < 0.3).astype(np.float32)
+    ts, td = transfer_frame(sparse, C, tgt), transfer_frame(dense, C, tgt)
+    np.testing.assert_allclose(np.asarray(bsfjax.transfer(sparse, ts, F, sparsity=6)),
+                               np.asarray(bsfjax.decode(ts, bsfjax.encode(sparse, F, sparsity=6))),
+                               rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(bsfjax.approximate(sparse, F, sparsity=6)),
+                               np.asarray(bsfjax.approximate(dense, F, sparsity=6)),
+                               rtol=1e-4, atol=1e-4)
+    assert encode(sparse, np.zeros((0, src.n_vertices))).shape == (0, sparse.n_atoms)
+
+
+def test_automatic_choice_and_errors(pair, monkeypatch):
+    src, tgt, centers, _, sparse, C = pair
+    with pytest.raises(BSFError, match="sparse must be"):
+        build_frame(src, centers, sparse="yes")
+    monkeypatch.setattr(frame_mod, "DENSE_BUDGET_BYTES", 4 * src.n_vertices * 3 * len(centers) - 1)
+    assert isinstance(build_frame(src, centers), SparseFrame)
+    assert isinstance(build_frame(src, centers, sparse=False), bsfjax.Frame)
+    monkeypatch.setattr(frame_mod, "DENSE_BUDGET_BYTES", 4 * src.n_vertices * 3 * len(centers))
+    assert isinstance(build_frame(src, centers), bsfjax.Frame)
+    import bsfjax.coding as coding_mod
+
+    monkeypatch.setattr(coding_mod, "DENSE_BUDGET_BYTES", 8)
+    F = np.ones((1, src.n_vertices))
+    with pytest.raises(BSFError, match="dense q × q Gram"):
+        encode(sparse, F, "lstsq")
+    encode(sparse, F, "omp")  # OMP never needs it dense
+    with pytest.raises(BSFError, match="concrete"):
+        jax.jit(lambda ev: build_frame(bsfjax.Spectrum(src.evals, ev, src.mass), centers,
+                                       sparse=True).coeffs)(src.evecs)
+    with pytest.raises(BSFError, match="has length"):
+        encode(sparse, np.ones(src.n_vertices + 1))
+    with pytest.raises(BSFError, match="alpha must have shape"):
+        decode(sparse, np.ones(sparse.n_atoms + 1))
+    with pytest.raises(BSFError, match="unknown option"):
+        encode(sparse, F, "omp", sparsityy=3)
+
+
+def test_faust_sparse_build_matches_dense():
+    """A real mesh (FAUST, 6890 V, k = 40, 5 % centres × 3 scales): atom entries agree except
+    at the threshold."""
+    mesh = bsfjax.load_mesh(data_path("faust", "tr_reg_000.off"))
+    spec = bsfjax.spectrum(mesh, 40)
+    centers = bsfjax.farthest_point_sampling(mesh, 0.05)
+    dense = build_frame(spec, centers)
+    lists = sparse_atoms(spec.evecs, dense.coeffs, dense.gammas)
+    got = np.zeros(dense.atoms.shape, bool)
+    rows = np.repeat(np.arange(mesh.n_vertices), lists.shape[1])
+    ok = np.asarray(lists).ravel() < dense.n_atoms
+    got[rows[ok], np.asarray(lists).ravel()[ok]] = True
+    diff = got != (np.asarray(dense.atoms) > 0)
+    assert diff.sum() <= 1e-6 * diff.size + 2
+    assert not np.any(diff & ~_near_threshold(spec.evecs, dense.coeffs, dense.gammas))
+
+
+def test_dense_omp_host_gram_rows_match_the_gemm(pair, monkeypatch):
+    """A concrete binary frame coding a large batch takes its Gram rows from a host CSR copy
+    (precompute="auto"); the codes equal the full-Gram GEMM path."""
+    import bsfjax.coding as coding
+
+    _, _, _, dense, _, _ = pair
+    F = (np.random.default_rng(4).random((40, dense.n_vertices)) < 0.4).astype(np.float32)
+    registered = []
+    orig = coding._HostGramRows.register
+    monkeypatch.setattr(coding._HostGramRows, "register",
+                        classmethod(lambda cls, *a: registered.append(1) or orig(*a)))
+    for w in (None, "area"):
+        a_host, i_host = encode(dense, F, "omp", sparsity=6, weights=w, return_info=True)
+        a_gemm, i_gemm = encode(dense, F, "omp", sparsity=6, weights=w, precompute=True,
+                                return_info=True)
+        np.testing.assert_allclose(np.asarray(decode(dense, a_host)),
+                                   np.asarray(decode(dense, a_gemm)), rtol=1e-4, atol=1e-4)
+        np.testing.assert_allclose(np.asarray(i_host.residual), np.asarray(i_gemm.residual),
+                                   rtol=1e-5, atol=1e-5)
+    assert len(registered) == 2 and not coding._HostGramRows._live  # released after use
+
+
+def test_build_in_many_column_blocks(pair, monkeypatch):
+    """Blocks of 7 atoms (the last one padded), lists grown past their initial width: the same
+    lists as one block."""
+    import bsfjax.sparse_frame as sf_mod
+
+    src, _, _, dense, sparse, _ = pair
+    monkeypatch.setattr(sf_mod, "_BUILD_ELEMS", 7 * src.n_vertices)
+    assert dense.n_atoms % 7 != 0
+    lists = sparse_atoms(src.evecs, dense.coeffs, dense.gammas)
+    np.testing.assert_array_equal(np.asarray(lists), np.asarray(sparse.atom_lists))
+    assert lists.shape[1] > 16  # grew beyond the initial width
+
+
+def test_host_gram_rows_in_float64(pair):
+    """Under jax_enable_x64 the host rows keep float64 accuracy (weighted Gram rows are not
+    integers): sparse, dense-host and dense-GEMM OMP agree to 1e-10."""
+    _, _, _, _, sparse, _ = pair
+    with jax.enable_x64(True):
+        s64 = jax.tree.map(lambda x: jnp.asarray(np.asarray(x)), sparse)
+        d64 = bsfjax.Frame(atoms=s64.todense(jnp.float64), coeffs=s64.coeffs, taus=s64.taus,
+                           centers=s64.centers, mass=jnp.asarray(np.asarray(sparse.mass), jnp.float64))
+        F = (np.random.default_rng(6).random((40, sparse.n_vertices)) < 0.4).astype(np.float64)
+        res = [np.asarray(encode(fr, F, "omp", sparsity=6, weights="area", return_info=True,
+                                 **opts)[1].residual)
+               for fr, opts in ((s64, {}), (d64, {}), (d64, {"precompute": True}))]
+        assert res[0].dtype == np.float64
+        np.testing.assert_allclose(res[0], res[2], rtol=1e-10)
+        np.testing.assert_allclose(res[1], res[2], rtol=1e-10)
+
+
+def test_sparse_frames_with_the_adaptive_and_hygiene_options(pair):
+    """Adaptive scales build sparse too; pruning and p2p pull-back need dense atoms and say so;
+    the lasso's target support gives the dense path's codes on a sparse frame."""
+    src, tgt, centers, dense, sparse, C = pair
+    ad_dense = build_frame(src, centers, "adaptive")
+    ad_sparse = build_frame(src, centers, "adaptive", sparse=True)
+    np.testing.assert_array_equal(np.asarray(ad_sparse.taus), np.asarray(ad_dense.taus))
+    diff = np.asarray(ad_sparse.todense()) != np.asarray(ad_dense.atoms)
+    assert diff.sum() <= 4
+    with pytest.raises(BSFError, match="prune=True works on dense frames only"):
+        build_frame(src, centers, TAUS, prune=True, sparse=True)
+    with pytest.raises(BSFError, match="pulls back dense atoms"):
+        transfer_frame(sparse, C, tgt, p2p=np.arange(tgt.n_vertices))
+    F = (np.asarray(src.evecs[:, 1]) > 0).astype(np.float32)[None]
+    a_d = encode(dense, F, "lasso", target_atoms=6)
+    a_s = encode(sparse, F, "lasso", target_atoms=6)
+    assert int(np.sum(np.asarray(a_s) != 0)) <= 6
+    np.testing.assert_allclose(np.asarray(decode(sparse, a_s)), np.asarray(decode(dense, a_d)),
+                               atol=2e-3)
