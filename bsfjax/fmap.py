@@ -18,8 +18,8 @@ nearest,
 The nearest-neighbour search is exact and chunked: target rows are processed ``chunk`` at a time
 (``lax.map``), so at most ``chunk × n_M`` distances exist at once.  Both point sets are centred
 on the reference mean, candidates are ranked by ``‖y‖² − 2 x·y`` (one GEMM per chunk), and the
-best few (``_N_CANDIDATES``) are re-scored with the direct difference ``‖x − y‖²``, which removes
-the cancellation error of the expanded form.
+rows of the few best blocks of ``_BLOCK`` reference rows (``_N_BLOCKS``) are re-scored with the
+direct difference ``‖x − y‖²``, which removes the cancellation error of the expanded form.
 
 Refinement (all jitted, one ``lax.fori_loop``):
 
@@ -47,8 +47,10 @@ from .spectrum import Spectrum
 
 __all__ = ["fmap_from_p2p", "fmap_to_p2p", "zoomout", "icp_refine", "nearest_neighbors"]
 
-#: Candidates re-scored exactly per query (ties within float rounding of the expanded form).
-_N_CANDIDATES = 4
+#: The reference rows are searched in blocks of ``_BLOCK`` rows; the ``_N_BLOCKS`` blocks with the
+#: smallest expanded-form distance are re-scored exactly (ties within float rounding).
+_BLOCK = 32
+_N_BLOCKS = 4
 #: Default number of distances (chunk × n_M) alive at once in the nearest-neighbour search.
 _DEFAULT_BUDGET = 1 << 21
 
@@ -106,32 +108,44 @@ def _chunk_for(n_ref: int, n_query: int, chunk_size: int | None) -> int:
 def _nearest(ref: jax.Array, qry: jax.Array, chunk: int) -> jax.Array:
     """Index of the nearest row of ``ref`` ``(n_r, d)`` for every row of ``qry`` ``(n_q, d)``.
 
-    Exact: the expanded distance ‖r‖² − 2 q·r only shortlists ``_N_CANDIDATES`` rows, which are
-    then compared by the direct ‖q − r‖².  Memory: ``chunk × n_r``.
+    Exact up to ties: the expanded distance ‖r‖² − 2 q·r (one GEMM per chunk of queries) is
+    reduced to its minimum over blocks of :data:`_BLOCK` consecutive rows; every row of the
+    :data:`_N_BLOCKS` blocks with the smallest minima (which hold at least the rows of the
+    :data:`_N_BLOCKS` smallest expanded distances) is re-scored by the direct ‖q − r‖².  A block
+    minimum is a plain vectorized reduction, while XLA CPU's argmin / top-k over all ``n_r``
+    columns are several times slower than the GEMM itself.  Memory: ``chunk × n_r``.
     """
     n_q, d = qry.shape
+    n_r = ref.shape[0]
     n_chunks = -(-n_q // chunk)
     # Distances are translation invariant; centring keeps ‖r‖² small next to the gaps between
     # neighbours, so the expanded form loses little to cancellation.
     centre = jnp.mean(ref, axis=0)
     ref, qry = ref - centre, qry - centre
     qp = jnp.pad(qry, ((0, n_chunks * chunk - n_q), (0, 0)))
-    ref_sq = jnp.sum(ref * ref, axis=1)
-    n_cand = min(_N_CANDIDATES, ref.shape[0])
+    n_blk = -(-n_r // _BLOCK)
+    ref = jnp.pad(ref, ((0, n_blk * _BLOCK - n_r), (0, 0)))
+    valid = jnp.arange(n_blk * _BLOCK) < n_r
+    ref_sq = jnp.where(valid, jnp.sum(ref * ref, axis=1), jnp.inf)  # padding rows never win
+    ref_blocks = ref.reshape(n_blk, _BLOCK, d)
+    n_top = min(_N_BLOCKS, n_blk)
+    offsets = jnp.arange(_BLOCK)
 
     def one_chunk(q):  # (chunk, d)
         # ‖q − r‖² − ‖q‖²: the ranking over r does not need ‖q‖².  HIGHEST keeps GPUs off TF32.
         score = ref_sq[None, :] - 2.0 * jnp.matmul(q, ref.T, precision=lax.Precision.HIGHEST)
-        # Shortlist in float32 whatever the dtype: XLA's CPU top_k is ~200× slower in float64
-        # (it sorts), and far faster than argmin in float32; the re-scoring below is exact.
-        # Subtracting the row minimum first keeps the float64 gaps near the minimum in float32.
-        if score.dtype != jnp.float32:
-            score = (score - jnp.min(score, axis=1, keepdims=True)).astype(jnp.float32)
-        _, cand = lax.top_k(-score, n_cand)  # (chunk, n_cand)
-        diff = q[:, None, :] - ref[cand]
-        exact = jnp.sum(diff * diff, axis=-1)
+        bmin = jnp.min(score.reshape(q.shape[0], n_blk, _BLOCK), axis=2)  # (chunk, n_blk)
+        # top_k in float32 whatever the dtype (XLA CPU sorts in float64); subtracting the row
+        # minimum first keeps the gaps near it in float32; the re-scoring below is exact.
+        if bmin.dtype != jnp.float32:
+            bmin = (bmin - jnp.min(bmin, axis=1, keepdims=True)).astype(jnp.float32)
+        _, blk = lax.top_k(-bmin, n_top)  # (chunk, n_top)
+        diff = q[:, None, None, :] - ref_blocks[blk]  # (chunk, n_top, _BLOCK, d)
+        exact = jnp.sum(diff * diff, axis=-1).reshape(q.shape[0], n_top * _BLOCK)
+        ids = (blk[:, :, None] * _BLOCK + offsets).reshape(q.shape[0], n_top * _BLOCK)
+        exact = jnp.where(ids < n_r, exact, jnp.inf)
         best = jnp.argmin(exact, axis=1)
-        return jnp.take_along_axis(cand, best[:, None], axis=1)[:, 0]
+        return jnp.take_along_axis(ids, best[:, None], axis=1)[:, 0]
 
     out = lax.map(one_chunk, qp.reshape(n_chunks, chunk, d))
     return out.reshape(-1)[:n_q].astype(jnp.int32)
