@@ -31,20 +31,13 @@ import bsfjax
 from bsfjax._files import write_text_atomic
 from bsfjax.mesh import mesh_edges, mesh_report
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_spectrum import median_time  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data"
 MESHES = ["faust/tr_reg_000.off", "faust_5k/tr_reg_000.off", "tosca_10k/cat/cat0.off",
           "tosca/cat/cat0.off"]
-
-
-def median_time(fn, repeats):
-    fn()
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts))
 
 
 def _old_edges(faces):

@@ -487,6 +487,18 @@ def _run_batch(entry: _BatchEntry, frame_args, F, dynamic):
 # ----------------------------------------------------------------------------------------------
 
 
+def _omp_bound(method, static, dynamic, fnorm2):
+    """``(m,)`` squared-residual bound ε of each function: ``−∞`` for ``"omp"`` (never reached,
+    so S steps run), else ``omp_error``'s bound in its ``eps_mode``."""
+    if method == "omp":
+        return jnp.full(fnorm2.shape, -jnp.inf, fnorm2.dtype)
+    if static["eps_mode"] == "relative":
+        return (EPS_FRACTION**2) * fnorm2
+    if static["eps_mode"] == "spams":
+        return EPS_FRACTION * jnp.sqrt(fnorm2)
+    return dynamic["eps"]
+
+
 @partial(jax.jit, static_argnames=("method", "static"))
 def _encode_batch(B, F, sqrt_w, dynamic, *, method, static):
     static = dict(static)
@@ -499,14 +511,7 @@ def _encode_batch(B, F, sqrt_w, dynamic, *, method, static):
         alpha = _lstsq(B, F, C, dynamic["rcond"])
         converged = jnp.ones(F.shape[0], bool)
     elif method in ("omp", "omp_error"):
-        if method == "omp":
-            eps = jnp.full(F.shape[0], -jnp.inf, F.dtype)  # never reached: run S steps
-        elif static["eps_mode"] == "relative":
-            eps = (EPS_FRACTION**2) * fnorm2
-        elif static["eps_mode"] == "spams":
-            eps = EPS_FRACTION * jnp.sqrt(fnorm2)
-        else:
-            eps = dynamic["eps"]
+        eps = _omp_bound(method, static, dynamic, fnorm2)
         alpha, n_sel, exhausted = _omp(B, C, fnorm2, eps, static["n_steps"], static["gram"],
                                        static["chunk"], dynamic.get("gram_token"))
         if method == "omp":
@@ -694,14 +699,7 @@ def _encode_sparse_batch(lists, F, w, gram, norms2, dynamic, *, method, static):
         alpha = _lstsq_gram(gram, C, lambda a: Bt(F - Bx(a)), norms2 > 0, dynamic["rcond"])
         converged = jnp.ones(m, bool)
     elif method in ("omp", "omp_error"):
-        if method == "omp":
-            eps = jnp.full(m, -jnp.inf, F.dtype)
-        elif static["eps_mode"] == "relative":
-            eps = (EPS_FRACTION**2) * fnorm2
-        elif static["eps_mode"] == "spams":
-            eps = EPS_FRACTION * jnp.sqrt(fnorm2)
-        else:
-            eps = dynamic["eps"]
+        eps = _omp_bound(method, static, dynamic, fnorm2)
         valid = norms2 > 0
         inv_norm = jnp.where(valid, 1.0 / jnp.sqrt(jnp.where(valid, norms2, 1.0)), 0.0)
 
