@@ -211,6 +211,37 @@ def test_dense_omp_host_gram_rows_match_the_gemm(pair, monkeypatch):
     assert len(registered) == 2 and not coding._HostGramRows._live  # released after use
 
 
+def test_host_gram_rows_are_computed_once_per_atom(pair, monkeypatch):
+    """Within one encode call each selected atom's Gram row is computed on the host once, however
+    many functions select it; with the row budget exhausted (nothing kept) the codes are the
+    same."""
+    import bsfjax.coding as coding
+
+    _, _, _, dense, sparse, _ = pair
+    F = (np.random.default_rng(5).random((30, dense.n_vertices)) < 0.3).astype(np.float32)
+    F = np.concatenate([F, F])  # every atom is selected by at least two functions
+    computed = []
+    orig = coding._HostGramRows.rows.__func__
+
+    def counting(cls, token, k):
+        before = sum(len(v[3]) for v in cls._live.values())
+        out = orig(cls, token, k)
+        computed.append(sum(len(v[3]) for v in cls._live.values()) - before)
+        return out
+
+    monkeypatch.setattr(coding._HostGramRows, "rows", classmethod(counting))
+    for frame in (dense, sparse):
+        computed.clear()
+        a = np.asarray(encode(frame, F, "omp", sparsity=6))
+        # host rows were used, and fewer were computed than atoms selected (shared atoms)
+        assert computed and 0 < sum(computed) < np.count_nonzero(a)
+        monkeypatch.setattr(coding, "_ROW_CACHE_BYTES", 0)
+        b = np.asarray(encode(frame, F, "omp", sparsity=6))
+        monkeypatch.setattr(coding, "_ROW_CACHE_BYTES", 2**28)
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a[:30], a[30:])
+
+
 def test_build_in_many_column_blocks(pair, monkeypatch):
     """Blocks of 7 atoms (the last one padded), lists grown past their initial width: the same
     lists as one block."""
