@@ -10,7 +10,9 @@ radius ``max_v D_n(v)`` of a sample, and every pair of samples is at least that 
 
 Three metrics ``d``:
 
-* ``"euclidean"``: straight-line distance between the points (one jitted ``lax.fori_loop``).
+* ``"euclidean"``: straight-line distance between the points (one jitted ``lax.fori_loop`` of
+  full passes; from :data:`PRUNED_FPS_MIN_POINTS` points on, a float64 loop that updates only
+  the k-d-tree ball each new sample can move, 11× faster at 40K points and 19× at 111K).
 * ``"geodesic"``: shortest paths along mesh edges weighted by their length (Dijkstra, scipy).
 * ``"biharmonic"``: Euclidean distance in the spectral embedding ``Φ[:, l] / λ_l`` over the
   non-zero eigenvalues (l ≥ 2, see ``ZERO_EIG_RTOL``), i.e. the biharmonic distance
@@ -92,6 +94,54 @@ def _fps_points(points: jax.Array, first: jax.Array, n: int) -> jax.Array:
 
 
 _fps_points_jit = jax.jit(_fps_points, static_argnums=2)
+
+#: From this many points on, Euclidean FPS runs :func:`_fps_pruned` (measured crossover on
+#: 2 cores: the jitted full passes take 4.5 ms at 10K points, 61 ms at 15K, 0.9 s at 40K; the
+#: pruned loop 28 ms, 33 ms, 82 ms).
+PRUNED_FPS_MIN_POINTS = 12_000
+_FPS_BLOCK = 256  # vertices per block of the running maxima in _fps_pruned
+
+
+def _fps_pruned(points: np.ndarray, first: int, n: int) -> np.ndarray:
+    """Euclidean FPS that updates only the vertices a new sample can move (float64, host).
+
+    Sample ``s`` is the farthest vertex, so every running minimum is ``D(v) ≤ D(s) = r²``:
+    only vertices in the ball ``|v − s| ≤ r`` can get closer, and a k-d tree returns that ball
+    (a few dozen vertices once the covering radius has shrunk) instead of a pass over all
+    ``N``.  The argmax is kept as maxima of blocks of :data:`_FPS_BLOCK` consecutive vertices:
+    the first block holding the overall maximum, then its first maximal vertex — the smallest
+    index among ties, as ``argmax`` in :func:`_fps_points`.  Each step touches the ball and
+    the blocks it falls in: ``O(N log N)`` overall for the usual shrinking balls, against
+    ``O(N n)`` for full passes.  Same picks as the float64 definition (the ball is widened by
+    1e-9 relative, and entries exactly at their minimum are left alone by the strict test).
+    """
+    import scipy.spatial
+
+    n_pts = points.shape[0]
+    tree = scipy.spatial.cKDTree(points)
+    n_blocks = -(-n_pts // _FPS_BLOCK)
+    mind = np.full(n_blocks * _FPS_BLOCK, -np.inf)  # padding never wins
+    mind[:n_pts] = np.sum((points - points[first]) ** 2, axis=1)
+    by_block = mind.reshape(n_blocks, _FPS_BLOCK)  # a view: updates of mind show here
+    block_max = by_block.max(axis=1)
+    idx = np.empty(n, dtype=np.int64)
+    idx[0] = first
+    for i in range(1, n):  # the greedy picks are sequential by definition
+        j = int(np.argmax(block_max))
+        s = j * _FPS_BLOCK + int(np.argmax(by_block[j]))
+        idx[i] = s
+        ps = points[s]
+        radius = float(np.sqrt(mind[s])) * (1 + 1e-9)
+        ball = np.asarray(tree.query_ball_point(ps, radius, return_sorted=False), np.int64)
+        if ball.size == 0:  # r = 0 and rounding: s itself is already at distance 0
+            continue
+        d2 = np.sum((points[ball] - ps) ** 2, axis=1)
+        closer = d2 < mind[ball]
+        moved = ball[closer]
+        mind[moved] = d2[closer]
+        touched = np.unique(moved // _FPS_BLOCK)
+        block_max[touched] = by_block[touched].max(axis=1)
+    return idx
 
 
 def _fps_geodesic(graph: sp.csr_matrix, first: int, n: int) -> np.ndarray:
@@ -191,5 +241,7 @@ def farthest_point_sampling(mesh, n, metric: str = "euclidean", seed: int = 0,
         return _fps_geodesic(edge_graph(mesh), first, count)
     if metric == "biharmonic":
         points = _biharmonic_embedding(spectrum, n_points)
+    elif n_points >= PRUNED_FPS_MIN_POINTS and count > 1:
+        return _fps_pruned(points, first, count)
     idx = _fps_points_jit(jnp.asarray(points), jnp.int32(first), count)
     return np.asarray(idx, dtype=np.int64)

@@ -59,6 +59,35 @@ def test_euclidean_matches_numpy_x64(cloud, seed, n):
     np.testing.assert_array_equal(got, want)
 
 
+@pytest.mark.parametrize("seed,n", [(0, 2), (5, 60), (11, 400)])
+def test_pruned_euclidean_matches_numpy(cloud, monkeypatch, seed, n):
+    """Above PRUNED_FPS_MIN_POINTS the k-d-tree pruned loop runs (float64 in any mode): the
+    textbook picks, all the way to n = N."""
+    import bsfjax.sampling as sampling
+
+    calls = []
+    orig = sampling._fps_pruned
+    monkeypatch.setattr(sampling, "_fps_pruned", lambda *a: calls.append(1) or orig(*a))
+    monkeypatch.setattr(sampling, "PRUNED_FPS_MIN_POINTS", 100)
+    got = farthest_point_sampling(cloud, n, seed=seed)
+    assert calls and got.dtype == np.int64 and got.shape == (n,)
+    np.testing.assert_array_equal(got, fps_reference(euclid(cloud), len(cloud), n, seed))
+
+
+def test_pruned_euclidean_ties_and_duplicates():
+    """A grid (many equal distances) with every point twice: ties go to the smallest index, and
+    once all distinct points are taken the picks repeat as the full-pass loop's do."""
+    g = np.stack(np.meshgrid(np.arange(6.0), np.arange(5.0), indexing="ij"), -1).reshape(-1, 2)
+    pts = np.concatenate([g, g])
+    import bsfjax.sampling as sampling
+
+    want = fps_reference(euclid(pts), len(pts), 45, seed=0)
+    np.testing.assert_array_equal(sampling._fps_pruned(pts, int(want[0]), 45), want)
+    with jax.enable_x64(True):
+        full = np.asarray(sampling._fps_points_jit(jax.numpy.asarray(pts), int(want[0]), 45))
+    np.testing.assert_array_equal(full, want)
+
+
 def test_euclidean_float32_is_a_valid_fps(cloud):
     """In float32 each pick must be a farthest point up to float32 rounding (checked in f64)."""
     idx = farthest_point_sampling(cloud, 50, seed=2)
