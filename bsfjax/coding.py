@@ -45,10 +45,12 @@ with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintaine
     from jaxopt.prox import prox_lasso
 
 from ._devices import map_over_devices, n_devices
+from ._memory import release_free_memory
 from ._validate import check_finite, magnitude_limit
 from .errors import BSFError
 from .frame import DENSE_BUDGET_BYTES, Frame
-from .sparse_frame import SparseFrame, ell_matmul, ell_rmatmul
+from .sparse_frame import (SparseFrame, atom_sums, atom_vertices, ell_gram_rows, ell_matmul,
+                           ell_rmatmul)
 
 __all__ = ["CodingInfo", "encode", "decode", "METHODS"]
 
@@ -545,8 +547,9 @@ def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options)
     """:func:`encode` for a :class:`SparseFrame`.
 
     OMP needs only the Gram rows ``G[k, :] = b_kᵀ W B`` of the atoms it selects (at most
-    ``steps`` per function).  They are computed on the host when selected, as sparse products
-    of ``B``'s scipy CSR form (``O(|supp b_k| · D)`` each, via :func:`jax.pure_callback`), so
+    ``steps`` per function).  They are computed on the host when selected, from the frame's
+    atom lists and their 16-bit transpose (``O(|supp b_k| · D)`` each, via
+    :func:`jax.pure_callback`; see :class:`_EllGramSource`), so
     the ``q × q`` Gram matrix is never formed — its full product would cost ``Σ_v D_v²``,
     e.g. ~50 G operations at 160K vertices.  ``lstsq``/``lasso`` do need ``G`` dense (host
     CSR product, then densified) and so are limited to frames with ``q² · 8`` bytes within
@@ -575,16 +578,18 @@ def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options)
                           jnp.ones(lead, bool))
         return (alpha, info) if return_info else alpha
     w64 = None if w is None else np.asarray(w, np.float64)
-    Bs = frame.to_scipy(w64)  # diag(√w) B, float64 CSR (n, q)
-    norms2 = np.asarray(Bs.multiply(Bs).sum(axis=0)).ravel()
     token = None
     static["info"] = return_info
     if method in ("omp", "omp_error"):
         static.pop("precompute")  # Gram rows come from the host either way
         static["chunk"] = max(1, min(m, _OMP_CHUNK_ELEMS // (static["n_steps"] * q)))
-        token = _HostGramRows.register(Bs, dtype)
+        source = _EllGramSource(frame, w64)
+        norms2 = source.norms2()
+        token = _HostGramRows.register(source, dtype)
         gram = jnp.asarray(token, jnp.int32)
     else:
+        Bs = frame.to_scipy(w64)  # diag(√w) B, float64 CSR (n, q); q² fits the dense budget
+        norms2 = np.asarray(Bs.multiply(Bs).sum(axis=0)).ravel()
         gram = jnp.asarray((Bs.T @ Bs).toarray(), dtype)
     if "eps" in dynamic:
         dynamic["eps"] = jnp.reshape(jnp.broadcast_to(jnp.asarray(dynamic["eps"], dtype), lead),
@@ -601,6 +606,7 @@ def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options)
     finally:
         if token is not None:
             _HostGramRows.release(token)
+            release_free_memory()  # the transpose and row temporaries (see bsfjax._memory)
     alpha = jnp.reshape(alpha, lead + (q,))
     if not return_info:
         return alpha
@@ -631,7 +637,7 @@ def _host_rows_token(atoms, w, dtype, rows: int):
                        shape=(n, q))
     if w is not None:
         Bs = sp.diags(np.sqrt(np.asarray(w, np.float64))) @ Bs
-    return _HostGramRows.register(Bs, dtype)
+    return _HostGramRows.register(_CsrGramSource(Bs), dtype)
 
 
 def _host_gram_rows(token, inv_norm, dtype):
@@ -653,24 +659,71 @@ def _host_gram_rows(token, inv_norm, dtype):
     return gram_rows
 
 
+class _CsrGramSource:
+    """Gram rows ``(Bs[:, k])ᵀ Bs`` of a scipy CSR ``Bs = diag(√w) B`` (the dense-frame path:
+    a CSR copy of a concrete ``(n, q)`` frame)."""
+
+    def __init__(self, Bs):
+        self.BT, self.B = Bs.T.tocsr(), Bs.tocsr()
+
+    def rows(self, ks) -> np.ndarray:
+        return (self.BT[ks] @ self.B).toarray()
+
+
+class _EllGramSource:
+    """Gram rows ``b_kᵀ W B`` of a :class:`SparseFrame` from its own atom lists (host view) and
+    their 16-bit transpose (:func:`~bsfjax.sparse_frame.atom_vertices`): about ``nnz · 2``
+    bytes besides the lists, where a float64 scipy CSR and its transpose took ``nnz · 24``.
+
+    Without weights the rows are the exact overlap counts; with weights each term is
+    ``√w_v · √w_v`` summed in increasing ``v``, the products and order of scipy's
+    ``diag(√w) B`` CSR product.
+    """
+
+    def __init__(self, frame: SparseFrame, w64):
+        self.lists = np.asarray(frame.atom_lists)  # on CPU a view of the device buffer
+        self.av = atom_vertices(self.lists, frame.n_atoms)
+        if w64 is None:
+            self.vals = None
+        else:
+            sw = np.sqrt(w64)
+            self.vals = sw * sw
+
+    def norms2(self) -> np.ndarray:
+        """``(q,)`` float64 ``‖b_j‖²_W``."""
+        if self.vals is None:
+            return np.diff(self.av.indptr).astype(np.float64)
+        return atom_sums(self.av, self.vals)
+
+    def rows(self, ks) -> np.ndarray:
+        return ell_gram_rows(self.lists, self.av, ks, self.vals)
+
+
+class _Registration(NamedTuple):
+    source: Any  # _CsrGramSource or _EllGramSource
+    dtype: np.dtype
+    cache: dict  # atom -> float64 row computed in this registration
+
+
 class _HostGramRows:
     """Rows ``G[k, :] = (WB)[:, k]ᵀ B`` of a sparse frame's Gram matrix, computed on the host.
 
-    A jitted kernel cannot hold scipy matrices, so each :func:`encode` call registers its
-    ``diag(√w) B`` under an integer token that the kernel passes to :func:`rows` through
+    A jitted kernel cannot hold host arrays, so each :func:`encode` call registers a row
+    source (:class:`_EllGramSource` for a :class:`SparseFrame`, :class:`_CsrGramSource` for a
+    dense frame) under an integer token that the kernel passes to :func:`rows` through
     :func:`jax.pure_callback` (the compiled kernel is shared by all frames of equal shapes).
     Within one registration every row is computed once: functions of a batch share many atoms
     (100 FAUST regions, 10 steps: 1000 selections of 436 distinct atoms), so each call computes
     only the rows it has not seen, up to :data:`_ROW_CACHE_BYTES` of kept rows.
     """
 
-    _live: dict[int, tuple] = {}
+    _live: dict[int, _Registration] = {}
     _next = 0
 
     @classmethod
-    def register(cls, Bs, dtype) -> int:
+    def register(cls, source, dtype) -> int:
         cls._next += 1
-        cls._live[cls._next] = (Bs.T.tocsr(), Bs.tocsr(), np.dtype(dtype), {})
+        cls._live[cls._next] = _Registration(source, np.dtype(dtype), {})
         return cls._next
 
     @classmethod
@@ -679,14 +732,14 @@ class _HostGramRows:
 
     @classmethod
     def rows(cls, token, k):
-        BT, B, dtype, cache = cls._live[int(token)]
+        source, dtype, cache = cls._live[int(token)]
         k = np.asarray(k).reshape(-1)
         uniq, inv = np.unique(k, return_inverse=True)
         # callbacks of several devices may run concurrently: dict reads/writes are atomic, and
         # a row computed twice by a race is the same row
         new = np.asarray([a for a in uniq.tolist() if a not in cache], np.int64)
         if new.size:
-            g_new = (BT[new] @ B).toarray()
+            g_new = source.rows(new)
             if (len(cache) + new.size) * g_new.shape[1] * 8 <= _ROW_CACHE_BYTES:
                 cache.update(zip(new.tolist(), g_new))
             else:  # too many to keep: this call's rows only

@@ -645,7 +645,7 @@ def transfer_frame(frame, C, target_spectrum: Spectrum, *, p2p=None, sparse: boo
         _check_sparse_concrete(C, frame.coeffs, frame.gammas, target_spectrum.evecs)
         dtype = jax.dtypes.canonicalize_dtype(jnp.float64)
         coeffs = _transfer_coeffs(jnp.asarray(C, dtype), jnp.asarray(frame.coeffs, dtype))
-        evecs = jnp.asarray(target_spectrum.evecs, dtype)[:, :k_n]
+        evecs = jnp.asarray(target_spectrum.evecs[:, :k_n], dtype)  # one (n, k_N) copy, not two
         return SparseFrame(atom_lists=sparse_atoms(evecs, coeffs, frame.gammas), coeffs=coeffs,
                            taus=frame.taus, centers=frame.centers,
                            mass=jnp.asarray(target_spectrum.mass), gammas=frame.gammas,

@@ -17,15 +17,20 @@ blocks so that no ``(n, q)`` or ``(nnz, m)`` array is formed):
     (B X)_v   = Σ_d X[j_d(v)]                 gather-sum    (X ``(q, m)``)
     (Bᵀ Y)_j  = Σ_{v : j ∈ lists(v)} Y_v        scatter-add   (Y ``(n, m)``)
     BᵀWB       scipy CSR product on the host (exact integer counts for W = I)
+    G[k, :]    one row of BᵀWB on the host: a bincount of the lists of supp b_k, found in the
+               16-bit transpose of the lists (:func:`atom_vertices`; OMP's Gram rows)
 
 The atoms are built from the same band-limited kernels ``g = Φ a`` as the dense frame
 (``frame.py``) in blocks of whole columns, in one pass over ``Φ``: ``O(n k q)`` flops like the
-dense build, ``O(n · block + nnz)`` memory.
+dense build, ``O(n · block + nnz)`` memory: the lists are appended to in vertex chunks
+(:class:`_ListBuilder`) and handed to JAX without a copy on CPU; the products slice the lists
+in place (no padded copy).
 """
 
 from __future__ import annotations
 
 from functools import partial
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -33,9 +38,11 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 
+from ._memory import release_free_memory
 from .errors import BSFError
 
-__all__ = ["SparseFrame", "sparse_atoms", "ell_matmul", "ell_rmatmul", "sparse_gram"]
+__all__ = ["SparseFrame", "sparse_atoms", "ell_matmul", "ell_rmatmul", "sparse_gram",
+           "AtomVertices", "atom_vertices", "atom_sums", "ell_gram_rows"]
 
 #: Kernel values per column block of the build (``n × block`` live at a time).
 _BUILD_ELEMS = 2**24
@@ -74,7 +81,7 @@ class SparseFrame(eqx.Module):
     @property
     def nnz(self) -> int:
         """Number of ones of ``B``."""
-        return int(jnp.sum(self.atom_lists < self.n_atoms))
+        return int(np.asarray(_block_counts(self.atom_lists, self.n_atoms)).sum(dtype=np.int64))
 
     @property
     def effective_taus(self) -> jax.Array:
@@ -112,13 +119,6 @@ class SparseFrame(eqx.Module):
 # --------------------------------------------------------------------------- build
 
 
-def _blocks(x: jax.Array, nb: int, fill) -> jax.Array:
-    """Pad axis 0 of ``x`` to a multiple of ``nb`` with ``fill`` and reshape to blocks."""
-    pad = -x.shape[0] % nb
-    x = jnp.pad(x, [(0, pad)] + [(0, 0)] * (x.ndim - 1), constant_values=fill)
-    return x.reshape((-1, nb) + x.shape[1:])
-
-
 @jax.jit
 def _mask_block(evecs, coeffs, gammas):
     """``(n, cb)`` bool atoms of a block of whole columns: ``|g| ≥ γ · max_v |g|``, ``g = Φ a``
@@ -135,10 +135,14 @@ def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
     One pass over blocks of whole columns (atoms), ``n × cb ≈ 2²⁴`` kernel values each: the
     device computes a block's mask (and its column maxima) while the host turns the previous
     one into (vertex, atom) pairs (``numpy.nonzero``, row-major) and appends them to each
-    vertex's list; blocks come in increasing atom order, so the lists stay sorted.  ``evecs``
-    ``(n, k)``, ``coeffs`` ``(k, q)``, ``gammas`` ``(q,)``; concrete arrays (``D`` is data
-    dependent).  An all-zero frame gets ``D = 1`` (every entry ``q``).
+    vertex's list (:class:`_ListBuilder`); blocks come in increasing atom order, so the lists
+    stay sorted.  ``evecs`` ``(n, k)``, ``coeffs`` ``(k, q)``, ``gammas`` ``(q,)``; concrete
+    arrays (``D`` is data dependent).  An all-zero frame gets ``D = 1`` (every entry ``q``).
+    Peak host memory: the final lists plus one vertex chunk (see :class:`_ListBuilder`).
     """
+    # what earlier stages freed but glibc kept (e.g. XLA's input conversions: 0.3–0.6 GiB at
+    # 445K vertices) goes back before the lists take their ~n·D·4 bytes
+    release_free_memory()
     evecs, coeffs, gammas = jnp.asarray(evecs), jnp.asarray(coeffs), jnp.asarray(gammas)
     n, q = evecs.shape[0], coeffs.shape[1]
     cb = int(max(1, min(q, _BUILD_ELEMS // max(n, 1))))
@@ -146,31 +150,99 @@ def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
     pad = n_blocks * cb - q  # zero columns: empty atoms, beyond q, never stored
     cblocks = jnp.pad(coeffs, ((0, 0), (0, pad))).T.reshape(n_blocks, cb, -1)
     gblocks = jnp.pad(gammas.astype(coeffs.dtype), (0, pad)).reshape(n_blocks, cb)
-    lists = np.full((n, 16), q, np.int32)
-    fill = np.zeros(n, np.int64)  # entries stored per vertex so far
+    lists = _ListBuilder(n, q)
 
-    def collect(b, mask, lists):
+    def collect(b, mask):
         r, c = np.nonzero(np.asarray(mask))
         keep = c + b * cb < q
-        r, c = r[keep], (c[keep] + b * cb).astype(np.int32)
-        cnt = np.bincount(r, minlength=n)
-        need = int((fill + cnt).max(initial=0))
-        if need > lists.shape[1]:  # grow the padded width geometrically
-            width = max(need, int(1.5 * lists.shape[1]))
-            lists = np.pad(lists, ((0, 0), (0, width - lists.shape[1])), constant_values=q)
-        first = np.cumsum(cnt) - cnt  # index in r of each vertex's first entry
-        lists[r, fill[r] + np.arange(r.size) - first[r]] = c
-        fill[:] += cnt
-        return lists
+        lists.append(r[keep], (c[keep] + b * cb).astype(np.int32))
 
     pending = None
     for b in range(n_blocks):
         mask = _mask_block(evecs, cblocks[b].T, gblocks[b])  # dispatched asynchronously
         if pending is not None:
-            lists = collect(*pending, lists)
+            collect(*pending)
         pending = (b, mask)
-    lists = collect(*pending, lists)
-    return jnp.asarray(lists[:, :max(1, int(fill.max(initial=0)))])
+    collect(*pending)
+    del pending, mask
+    out = lists.finish()
+    release_free_memory()  # the per-block temporaries (see bsfjax._memory)
+    # The aligned host buffer becomes the device array without a copy on CPU (device_put
+    # aliases 64-byte aligned numpy memory); jnp.asarray would copy it.
+    return jax.device_put(out)
+
+
+#: Vertex chunks of the lists under construction (each grows on its own; see _ListBuilder).
+_BUILD_CHUNKS = 32
+#: Slots added at least when a chunk grows (as rows of its transposed layout).
+_GROW_SLOTS = 64
+
+
+def _aligned_empty(shape, dtype, align: int = 64) -> np.ndarray:
+    """Uninitialised C-contiguous array whose data starts on an ``align``-byte boundary (XLA's
+    CPU client then shares numpy memory instead of copying it)."""
+    dtype = np.dtype(dtype)
+    size = int(np.prod(shape, dtype=np.int64))
+    raw = np.empty(size * dtype.itemsize + align, np.uint8)
+    off = -raw.ctypes.data % align
+    return raw[off:off + size * dtype.itemsize].view(dtype).reshape(shape)
+
+
+class _ListBuilder:
+    """Per-vertex sorted atom lists built by appending, with no growth copies of the whole.
+
+    The final width ``D`` (the largest count) is known only after the last block, and
+    re-padding one ``(n, W)`` array each time ``W`` grows would hold two copies.  So the
+    vertices are split into :data:`_BUILD_CHUNKS` chunks, each stored transposed, ``(W_c,
+    n_c)``: slot ``d`` of every vertex of the chunk is one contiguous row, and growing ``W_c``
+    appends rows in place (``ndarray.resize``: ``realloc``, which remaps pages instead of
+    copying a large block).  :meth:`finish` writes the ``(n, D)`` lists chunk by chunk and
+    frees each chunk as it goes, so the peak is about one copy of the lists.
+    """
+
+    def __init__(self, n: int, q: int):
+        self.n, self.q = n, q
+        step = max(1, -(-n // _BUILD_CHUNKS))
+        self.bounds = np.append(np.arange(0, n, step), n)
+        self.chunks = [np.full((0, e - s), q, np.int32)
+                       for s, e in zip(self.bounds[:-1], self.bounds[1:])]
+        self.fill = np.zeros(n, np.int64)  # entries stored per vertex so far
+
+    def append(self, r: np.ndarray, c: np.ndarray) -> None:
+        """Append atoms ``c`` to vertices ``r`` (``r`` nondecreasing, ``c`` larger than every
+        atom stored so far, increasing within each vertex)."""
+        cnt = np.bincount(r, minlength=self.n)
+        first = np.cumsum(cnt) - cnt  # index in r of each vertex's first entry
+        slot = self.fill[r] + np.arange(r.size) - first[r]
+        cuts = np.searchsorted(r, self.bounds)
+        for i, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
+            if a == b:
+                continue
+            need = int(slot[a:b].max()) + 1
+            if need > self.chunks[i].shape[0]:
+                self._grow(i, max(need, self.chunks[i].shape[0] + _GROW_SLOTS))
+            self.chunks[i][slot[a:b], r[a:b] - self.bounds[i]] = c[a:b]
+        self.fill += cnt
+
+    def _grow(self, i: int, slots: int) -> None:
+        chunk = self.chunks[i]
+        old = chunk.shape[0]
+        # the chunk is private to this builder (no views exist), so resizing in place is safe
+        chunk.resize((slots, chunk.shape[1]), refcheck=False)
+        chunk[old:] = self.q
+
+    def finish(self) -> np.ndarray:
+        """The ``(n, D)`` int32 lists, 64-byte aligned; the builder is emptied."""
+        width = max(1, int(self.fill.max(initial=0)))
+        out = _aligned_empty((self.n, width), np.int32)
+        for i, (s, e) in enumerate(zip(self.bounds[:-1], self.bounds[1:])):
+            chunk, self.chunks[i] = self.chunks[i], None
+            have = min(width, chunk.shape[0])
+            for v in range(0, e - s, 256):  # transpose in column panels (cache friendly)
+                out[s + v:s + min(v + 256, e - s), :have] = chunk[:have, v:v + 256].T
+            out[s:e, have:] = self.q
+            del chunk  # freed before the next chunk is written
+        return out
 
 
 # --------------------------------------------------------------------------- products
@@ -180,14 +252,49 @@ def _product_rows(n: int, width: int, m: int) -> int:
     return int(max(1, min(n, _PRODUCT_ELEMS // max(width * m, 1))))
 
 
+def _block_start(i, nb: int, n: int):
+    """First row of block ``i`` of ``nb`` rows: ``i · nb``, except that the last block is moved
+    back to end at row ``n`` (it then overlaps its predecessor).  Slicing the unpadded lists
+    this way avoids the padded copy of the whole ``(n, D)`` array that blocking would need."""
+    return jnp.minimum(i * nb, n - nb)
+
+
 @jax.jit
 def ell_matmul(atom_lists: jax.Array, X: jax.Array) -> jax.Array:
     """``B X``: ``(n, m)`` from ``X`` ``(q, m)`` (gather-sum over each vertex's atoms)."""
     n, width = atom_lists.shape
+    m = X.shape[1]
     Xp = jnp.concatenate([X, jnp.zeros((1,) + X.shape[1:], X.dtype)])  # row q: padding
-    nb = _product_rows(n, width, X.shape[1])
-    out = jax.lax.map(lambda rows: jnp.sum(Xp[rows], axis=1), _blocks(atom_lists, nb, X.shape[0]))
-    return out.reshape(-1, X.shape[1])[:n]
+    if n == 0:
+        return jnp.zeros((0, m), X.dtype)
+    nb = _product_rows(n, width, m)
+
+    def block(i, out):  # the overlapping rows of the last block get the same values again
+        s = _block_start(i, nb, n)
+        rows = jax.lax.dynamic_slice_in_dim(atom_lists, s, nb)
+        return jax.lax.dynamic_update_slice_in_dim(out, jnp.sum(Xp[rows], axis=1), s, axis=0)
+
+    return jax.lax.fori_loop(0, -(-n // nb), block, jnp.zeros((n, m), X.dtype))
+
+
+@partial(jax.jit, static_argnames="q")
+def _block_counts(atom_lists: jax.Array, q: int) -> jax.Array:
+    """Entries ``< q`` of each row block (int32 per block, summed in int64 by the caller).  A
+    loop over blocks: ``jnp.sum(atom_lists < q)`` may materialise the ``(n, D)`` mask (0.9 GB
+    at 445K vertices)."""
+    n, width = atom_lists.shape
+    if n == 0:
+        return jnp.zeros(0, jnp.int32)
+    nb = _product_rows(n, width, 1)
+
+    def block(i, counts):
+        s = _block_start(i, nb, n)
+        rows = jax.lax.dynamic_slice_in_dim(atom_lists, s, nb)
+        fresh = (s + jnp.arange(nb) >= i * nb)[:, None]  # not counted by the previous block
+        return counts.at[i].set(jnp.sum((rows < q) & fresh, dtype=jnp.int32))
+
+    n_blocks = -(-n // nb)
+    return jax.lax.fori_loop(0, n_blocks, block, jnp.zeros(n_blocks, jnp.int32))
 
 
 @partial(jax.jit, static_argnames="q")
@@ -195,17 +302,135 @@ def ell_rmatmul(atom_lists: jax.Array, Y: jax.Array, q: int) -> jax.Array:
     """``Bᵀ Y``: ``(q, m)`` from ``Y`` ``(n, m)`` (scatter-add of each vertex's row)."""
     n, width = atom_lists.shape
     m = Y.shape[1]
+    acc = jnp.zeros((q + 1, m), Y.dtype)  # row q collects the padding
+    if n == 0:
+        return acc[:q]
     nb = _product_rows(n, width, m)
-    lists = _blocks(atom_lists, nb, q)
-    ys = _blocks(Y, nb, 0.0)
 
-    def step(acc, blk):
-        rows, y = blk
+    def step(i, acc):
+        s = _block_start(i, nb, n)
+        rows = jax.lax.dynamic_slice_in_dim(atom_lists, s, nb)
+        y = jax.lax.dynamic_slice_in_dim(Y, s, nb)
+        # rows of the last block that its predecessor already added go to the padding row
+        rows = jnp.where((s + jnp.arange(nb) >= i * nb)[:, None], rows, q)
         upd = jnp.broadcast_to(y[:, None, :], rows.shape + (m,))
-        return acc.at[rows].add(upd, mode="drop"), None
+        return acc.at[rows].add(upd, mode="drop")
 
-    acc = jnp.zeros((q + 1, m), Y.dtype)
-    return jax.lax.scan(step, acc, (lists, ys))[0][:q]
+    return jax.lax.fori_loop(0, -(-n // nb), step, acc)[:q]
+
+
+# --------------------------------------------------------------------------- host transpose
+
+#: ELL entries (or transposed entries) per chunk of the host passes below.
+_HOST_CHUNK_ELEMS = 2**23
+
+
+def _row_chunks(lo: int, hi: int, width: int):
+    """Row ranges covering ``[lo, hi)`` of about :data:`_HOST_CHUNK_ELEMS` entries each."""
+    step = max(1, _HOST_CHUNK_ELEMS // max(width, 1))
+    return [(s, min(s + step, hi)) for s in range(lo, hi, step)]
+
+
+#: Vertices per panel of :class:`AtomVertices` (``2**_PANEL_BITS``; 16 bits fit uint16).
+_PANEL_BITS = 16
+
+
+class AtomVertices(NamedTuple):
+    """The transpose of the atom lists (the CSC structure of ``B``) in 16-bit panels.
+
+    ``supp b_j`` (increasing) is stored in ``lo[indptr[j]:indptr[j+1]]`` as offsets within
+    panels of ``2**16`` vertices: entries ``starts[j, p] … starts[j, p+1]`` lie in panel ``p``
+    (vertex ``= p · 2**16 + lo``).  Half the memory of int32 indices (``nnz · 2`` bytes plus
+    ``q × (panels + 1)`` offsets): the host Gram rows of OMP need it next to the lists.
+    """
+
+    indptr: np.ndarray  # (q + 1,) int64
+    starts: np.ndarray  # (q, panels + 1) int64, starts[:, -1] = indptr[1:]
+    lo: np.ndarray  # (nnz,) uint16
+
+    def vertices(self, j: int) -> np.ndarray:
+        """``supp b_j``: ``(|supp b_j|,)`` int64 vertex indices, increasing."""
+        a, b = int(self.indptr[j]), int(self.indptr[j + 1])
+        hi = np.repeat(np.arange(self.starts.shape[1] - 1, dtype=np.int64) << _PANEL_BITS,
+                       np.diff(self.starts[j]))
+        return self.lo[a:b] + hi
+
+
+def atom_vertices(atom_lists, q: int) -> AtomVertices:
+    """:class:`AtomVertices` of the lists: ``supp b_j`` for every atom, sorted.
+
+    A counting sort in row chunks of about :data:`_HOST_CHUNK_ELEMS` entries, each within one
+    panel: every chunk is transposed by scipy (``csr_tocsc``, O(entries), int8 data) and its
+    vertices are written after those of the earlier chunks, so each atom's vertices stay
+    sorted.  Memory: the result plus per-chunk buffers; no array of all entries wider than 16
+    bits, no float data.
+    """
+    lists = np.asarray(atom_lists)  # on CPU a view of the device buffer, not a copy
+    n, width = lists.shape
+    panel = 1 << _PANEL_BITS
+    n_panels = max(1, -(-n // panel))
+    counts = np.zeros(q + 1, np.int64)
+    for s, e in _row_chunks(0, n, width):
+        counts += np.bincount(lists[s:e].ravel(), minlength=q + 1)
+    indptr = np.zeros(q + 1, np.int64)
+    np.cumsum(counts[:q], out=indptr[1:])
+    lo = np.empty(int(indptr[-1]), np.uint16 if _PANEL_BITS <= 16 else np.uint32)
+    starts = np.empty((q, n_panels + 1), np.int64)
+    nxt = indptr[:-1].copy()  # next free slot of each atom
+    for p in range(n_panels):
+        starts[:, p] = nxt
+        for s, e in _row_chunks(p * panel, min(n, (p + 1) * panel), width):
+            block = lists[s:e]
+            valid = block < q
+            ptr = np.zeros(e - s + 1, np.int64)
+            np.cumsum(valid.sum(axis=1), out=ptr[1:])
+            atoms = block[valid]
+            csc = sp.csr_matrix((np.ones(atoms.size, np.int8), atoms, ptr),
+                                shape=(e - s, q)).tocsc()
+            per = np.diff(csc.indptr)
+            dest = np.repeat(nxt - csc.indptr[:-1], per) + np.arange(csc.nnz)
+            lo[dest] = csc.indices + (s - p * panel)
+            nxt += per
+    starts[:, n_panels] = nxt
+    return AtomVertices(indptr, starts, lo)
+
+
+def atom_sums(av: AtomVertices, vals: np.ndarray) -> np.ndarray:
+    """``(q,)`` float64 ``s_j = Σ_{v ∈ supp b_j} vals[v]``, summed in increasing ``v`` (the
+    order of scipy's CSR products), in chunks of whole atoms."""
+    q = av.indptr.size - 1
+    out = np.zeros(q, np.float64)
+    step = max(1, int(q * _HOST_CHUNK_ELEMS // max(int(av.indptr[-1]), 1)))
+    for a in range(0, q, step):
+        b = min(a + step, q)
+        verts = np.concatenate([av.vertices(j) for j in range(a, b)] + [np.zeros(0, np.int64)])
+        owner = np.repeat(np.arange(b - a), np.diff(av.indptr[a:b + 1]))
+        out[a:b] = np.bincount(owner, weights=vals[verts], minlength=b - a)
+    return out
+
+
+def ell_gram_rows(atom_lists, av: AtomVertices, ks, vals=None) -> np.ndarray:
+    """Rows ``G[k, :] = Σ_{v ∈ supp b_k} vals[v] · B[v, :]`` ``(len(ks), q)`` float64 (host).
+
+    ``vals = None``: the overlap counts ``|supp b_k ∩ supp b_j|`` (exact), else the weighted
+    rows of ``BᵀWB`` with ``vals = w`` (summed in increasing ``v``).  Each row is a
+    ``bincount`` over the lists of the vertices of atom ``k`` (from :func:`atom_vertices`):
+    ``O(|supp b_k| · D)``, in vertex chunks of about :data:`_HOST_CHUNK_ELEMS` entries so that
+    a large atom needs no ``|supp| × D`` int64 buffer (the weighted row of such an atom then
+    adds the chunks' partial sums).
+    """
+    lists = np.asarray(atom_lists)
+    q = av.indptr.size - 1
+    width = lists.shape[1]
+    step = max(1, _HOST_CHUNK_ELEMS // max(width, 1))
+    out = np.zeros((len(ks), q + 1), np.float64)  # column q: the padding
+    for i, k in enumerate(np.asarray(ks, np.int64).tolist()):
+        supp = av.vertices(k)
+        for s in range(0, supp.size, step):
+            verts = supp[s:s + step]
+            wts = None if vals is None else np.repeat(vals[verts], width)
+            out[i] += np.bincount(lists[verts].ravel(), weights=wts, minlength=q + 1)
+    return out[:, :q]
 
 
 def sparse_gram(frame: SparseFrame, weights=None) -> sp.csr_matrix:

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 import bsfjax
 from bsfjax import BSFError, SparseFrame, build_frame, decode, encode, transfer_frame
@@ -224,9 +225,9 @@ def test_host_gram_rows_are_computed_once_per_atom(pair, monkeypatch):
     orig = coding._HostGramRows.rows.__func__
 
     def counting(cls, token, k):
-        before = sum(len(v[3]) for v in cls._live.values())
+        before = sum(len(v.cache) for v in cls._live.values())
         out = orig(cls, token, k)
-        computed.append(sum(len(v[3]) for v in cls._live.values()) - before)
+        computed.append(sum(len(v.cache) for v in cls._live.values()) - before)
         return out
 
     monkeypatch.setattr(coding._HostGramRows, "rows", classmethod(counting))
@@ -243,16 +244,125 @@ def test_host_gram_rows_are_computed_once_per_atom(pair, monkeypatch):
 
 
 def test_build_in_many_column_blocks(pair, monkeypatch):
-    """Blocks of 7 atoms (the last one padded), lists grown past their initial width: the same
-    lists as one block."""
+    """Blocks of 7 atoms (the last one padded), lists in 5 vertex chunks grown one slot at a
+    time: the same lists as one block."""
     import bsfjax.sparse_frame as sf_mod
 
     src, _, _, dense, sparse, _ = pair
     monkeypatch.setattr(sf_mod, "_BUILD_ELEMS", 7 * src.n_vertices)
+    monkeypatch.setattr(sf_mod, "_BUILD_CHUNKS", 5)
+    monkeypatch.setattr(sf_mod, "_GROW_SLOTS", 1)
     assert dense.n_atoms % 7 != 0
     lists = sparse_atoms(src.evecs, dense.coeffs, dense.gammas)
     np.testing.assert_array_equal(np.asarray(lists), np.asarray(sparse.atom_lists))
-    assert lists.shape[1] > 16  # grew beyond the initial width
+    assert lists.shape[1] > 16
+
+
+def _random_lists(rng, n, q, density):
+    """Random 0/1 ``B`` ``(n, q)`` (with an empty atom and an empty vertex) and its lists."""
+    B = rng.random((n, q)) < density
+    B[:, 3] = False
+    B[5] = False
+    width = max(1, int(B.sum(axis=1).max()))
+    lists = np.stack([np.concatenate([np.flatnonzero(r), np.full(width - r.sum(), q)])
+                      for r in B]).astype(np.int32)
+    return B, lists
+
+
+def test_list_builder_appends_in_chunks(monkeypatch):
+    """Appending atoms block by block into vertex chunks (uneven last chunk, growth by one slot,
+    vertices with no atoms) gives the sorted padded lists, 64-byte aligned."""
+    import bsfjax.sparse_frame as sf_mod
+
+    rng = np.random.default_rng(1)
+    n, q = 83, 41
+    B, lists = _random_lists(rng, n, q, 0.3)
+    for chunks, grow in ((4, 1), (1, 64), (200, 3)):
+        monkeypatch.setattr(sf_mod, "_BUILD_CHUNKS", chunks)
+        monkeypatch.setattr(sf_mod, "_GROW_SLOTS", grow)
+        builder = sf_mod._ListBuilder(n, q)
+        for lo in range(0, q, 6):  # atoms arrive in increasing blocks, as in sparse_atoms
+            r, c = np.nonzero(B[:, lo:lo + 6])
+            builder.append(r, (c + lo).astype(np.int32))
+        out = builder.finish()
+        np.testing.assert_array_equal(out, lists)
+        assert out.dtype == np.int32 and out.ctypes.data % 64 == 0
+    empty = sf_mod._ListBuilder(4, 9).finish()
+    np.testing.assert_array_equal(empty, np.full((4, 1), 9))
+
+
+def test_products_in_overlapping_blocks(monkeypatch):
+    """Blocks that do not divide n (the last one moved back over its predecessor): every row is
+    counted once in B X, Bᵀ Y and nnz; integer data, so the sums are exact."""
+    import bsfjax.sparse_frame as sf_mod
+
+    rng = np.random.default_rng(2)
+    n, q, m = 61, 29, 3
+    B, lists = _random_lists(rng, n, q, 0.25)
+    X = rng.integers(-4, 5, size=(q, m)).astype(np.float32)
+    Y = rng.integers(-4, 5, size=(n, m)).astype(np.float32)
+    width = lists.shape[1]
+    for rows in (1, 7, 60, n):
+        monkeypatch.setattr(sf_mod, "_PRODUCT_ELEMS", rows * width * m)
+        # new lambdas: retraced with the patched block size (jit caches by function)
+        matmul = jax.jit(lambda a, x: sf_mod.ell_matmul.__wrapped__(a, x))
+        rmatmul = jax.jit(lambda a, y: sf_mod.ell_rmatmul.__wrapped__(a, y, q))
+        counts = jax.jit(lambda a: sf_mod._block_counts.__wrapped__(a, q))
+        np.testing.assert_array_equal(np.asarray(matmul(jnp.asarray(lists), jnp.asarray(X))),
+                                      B.astype(np.float32) @ X)
+        np.testing.assert_array_equal(np.asarray(rmatmul(jnp.asarray(lists), jnp.asarray(Y))),
+                                      B.T.astype(np.float32) @ Y)
+        assert int(np.asarray(counts(jnp.asarray(lists))).sum()) == B.sum()
+
+
+def test_atom_vertices_is_the_scipy_transpose(monkeypatch):
+    """The chunked counting-sort transpose equals scipy's CSC of B (indptr and sorted vertex
+    indices), for one chunk, for chunks of a few rows, and with panels of 8 vertices."""
+    import bsfjax.sparse_frame as sf_mod
+
+    rng = np.random.default_rng(3)
+    n, q = 70, 37
+    B, lists = _random_lists(rng, n, q, 0.2)
+    ref = sp.csc_matrix(B)
+    for elems, bits in ((2**23, 16), (3 * lists.shape[1], 16), (1, 16), (2 * lists.shape[1], 3)):
+        monkeypatch.setattr(sf_mod, "_HOST_CHUNK_ELEMS", elems)
+        monkeypatch.setattr(sf_mod, "_PANEL_BITS", bits)
+        av = sf_mod.atom_vertices(jnp.asarray(lists), q)
+        assert av.lo.dtype == np.uint16 and av.starts.shape == (q, -(-n // 2**bits) + 1)
+        np.testing.assert_array_equal(av.indptr, ref.indptr)
+        got = [av.vertices(j) for j in range(q)]
+        assert all(g.dtype == np.int64 for g in got)
+        np.testing.assert_array_equal(np.concatenate(got), ref.indices)
+
+
+def test_ell_gram_rows_equal_the_csr_product(monkeypatch):
+    """Gram rows from the lists and their transpose equal scipy's ``(√w B)ᵀ (√w B)`` rows and
+    column norms: bitwise (same products, same order) in one chunk; counts exactly and weighted
+    rows to rounding when an atom's vertices are split over chunks."""
+    import bsfjax.sparse_frame as sf_mod
+
+    rng = np.random.default_rng(4)
+    n, q = 90, 33
+    B, lists = _random_lists(rng, n, q, 0.3)
+    w = rng.random(n) + 0.1
+    sw = np.sqrt(w)
+    Bw = sp.csr_matrix(B * sw[:, None])
+    ks = np.array([0, 3, 7, 7, q - 1])  # an empty atom, a repeated one
+    monkeypatch.setattr(sf_mod, "_PANEL_BITS", 4)  # several panels
+    av = sf_mod.atom_vertices(lists, q)
+    ref_counts = (sp.csr_matrix(B.astype(float)).T[ks] @ sp.csr_matrix(B.astype(float))).toarray()
+    ref_w = (Bw.T.tocsr()[ks] @ Bw).toarray()
+    for elems, exact in ((2**23, True), (2 * lists.shape[1], False)):
+        monkeypatch.setattr(sf_mod, "_HOST_CHUNK_ELEMS", elems)
+        np.testing.assert_array_equal(sf_mod.ell_gram_rows(lists, av, ks), ref_counts)
+        got = sf_mod.ell_gram_rows(lists, av, ks, sw * sw)
+        if exact:
+            np.testing.assert_array_equal(got, ref_w)
+        else:
+            np.testing.assert_allclose(got, ref_w, rtol=1e-14)
+        # column norms are summed per whole atom, so chunking never changes them
+        np.testing.assert_array_equal(sf_mod.atom_sums(av, sw * sw),
+                                      np.asarray(Bw.multiply(Bw).sum(axis=0)).ravel())
 
 
 def test_host_gram_rows_in_float64(pair):
