@@ -28,7 +28,8 @@ Stages and peers (same inputs, same run; peers float64):
   pyFM ``FunctionalMapping.fit``;
 * point-map conversion (k = 30) — ``fmap_to_p2p`` vs pyFM ``FM_to_p2p``;
 * whole pipeline after the eigensolve for 100 functions: sampling + frame + ``omp`` + frame
-  transfer + decoding on the target, vs numpy + scikit-learn doing the same steps.
+  transfer + decoding on the target, vs numpy + scikit-learn doing the same steps (at 7k the
+  two sides are called alternately, ``--repeats`` rounds, and each row has its own medians).
 
 A peer that cannot run at a size (the dense float64 frame or Gram matrix does not fit) is listed
 with its reason.  Times: median of ``--repeats`` calls after one warm-up call (compilation) at
@@ -40,8 +41,17 @@ with its reason.  Times: median of ``--repeats`` calls after one warm-up call (c
 
 from __future__ import annotations
 
-import argparse
-import json
+import os
+
+# OpenBLAS (numpy/scipy's BLAS) keeps its worker threads spinning for ~0.1 s after every call;
+# on a 2-core machine they then compete with XLA's threads for the cores: FAUST's pipeline
+# measured right after a numpy GEMM took 93 ms instead of 57.  A short spin (2⁴ cycles; set
+# before numpy loads OpenBLAS) removes that cross-talk between the two sides of one run
+# without slowing the peers (pipeline peer 311 ms with it, 291–332 ms without).
+os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
 import sys
 import time
 import warnings
@@ -91,6 +101,23 @@ def timed(fn, repeats: int):
         out = jax.block_until_ready(fn())
         ts.append(time.perf_counter() - t0)
     return (float(np.median(ts)) if ts else first), out, first
+
+
+def interleaved(ours, peer, repeats: int):
+    """(median seconds of ``ours``, of ``peer``, peer's result): one warm-up call each, then
+    ``repeats`` rounds of one call of each, so that slow phases of a shared machine fall on both
+    sides rather than on whichever ran then."""
+    jax.block_until_ready(ours())
+    out = peer()
+    ta, tb = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(ours())
+        ta.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        out = peer()
+        tb.append(time.perf_counter() - t0)
+    return float(np.median(ta)), float(np.median(tb)), out
 
 
 #: Seconds of a peer's one-off set-up (not per function) in its last call, e.g. the Gram matrix
@@ -310,10 +337,14 @@ def run_size(suite: Suite, size: str):
             Bt = numpy_transfer(coeffs, C_id, np.asarray(sn.evecs))
             return a @ Bt.T.astype(np.float64)
 
-        t_p, moved_p, _ = timed(peer_pipeline, rep if size == "7k" else rep_slow)
+        if size == "7k":  # both sides alternately, so that drifts of the machine hit both
+            t_pair, t_p, moved_p = interleaved(ours_pipeline, peer_pipeline, rep)
+        else:
+            t_pair = t_ours
+            t_p, moved_p, _ = timed(peer_pipeline, rep_slow)
         err_p = float(np.median(np.asarray(bsfjax.relative_error(F, moved_p, sn.mass))))
         name = "numpy + sklearn orthogonal_mp" + ("(precompute=True)" if pre else "")
-        suite.add(size, n, "pipeline after eigensolve", t_ours, name, t_p,
+        suite.add(size, n, "pipeline after eigensolve", t_pair, name, t_p,
                   f"100 functions; transfer rel. error ours {err:.3f} / peer {err_p:.3f}",
                   repeats=rep)
 
