@@ -280,6 +280,31 @@ def _check_magnitude(f, w, n, dtype):
                        "jax_enable_x64")
 
 
+def _empty_codes(lead, q: int, dtype, return_info: bool):
+    """The result of coding an empty batch of leading shape ``lead`` (nothing to trace)."""
+    alpha = jnp.zeros(lead + (q,), dtype)
+    info = CodingInfo(jnp.zeros(lead, jnp.int32), jnp.zeros(lead, dtype), jnp.ones(lead, bool))
+    return (alpha, info) if return_info else alpha
+
+
+def _flatten_per_function(dynamic: dict, lead, m: int, q: int, dtype) -> None:
+    """Give the per-function options (``eps`` broadcast to ``lead``, ``init`` ``(..., q)``) the
+    flat batch axis ``m`` of the kernels, in place."""
+    if "eps" in dynamic:
+        dynamic["eps"] = jnp.reshape(jnp.broadcast_to(jnp.asarray(dynamic["eps"], dtype), lead),
+                                     (m,))
+    if dynamic.get("init") is not None:
+        dynamic["init"] = jnp.reshape(jnp.asarray(dynamic["init"], dtype), (m, q))
+
+
+def _shaped_codes(alpha, info, lead, return_info: bool):
+    """The kernels' flat ``(m, q)`` codes (and info) back in the caller's leading shape."""
+    alpha = jnp.reshape(alpha, lead + (alpha.shape[-1],))
+    if not return_info:
+        return alpha
+    return alpha, jax.tree.map(lambda x: jnp.reshape(x, lead), info)
+
+
 # ----------------------------------------------------------------------------------------------
 # Public API
 # ----------------------------------------------------------------------------------------------
@@ -372,11 +397,7 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
     F = jnp.reshape(jnp.asarray(f, dtype), (m, n))
     B = jnp.asarray(atoms, dtype)
     sqrt_w = None if w is None else jnp.sqrt(jnp.asarray(w, dtype))
-    if "eps" in dynamic:
-        dynamic["eps"] = jnp.reshape(jnp.broadcast_to(jnp.asarray(dynamic["eps"], dtype), lead),
-                                     (m,))
-    if dynamic.get("init") is not None:
-        dynamic["init"] = jnp.reshape(jnp.asarray(dynamic["init"], dtype), (m, q))
+    _flatten_per_function(dynamic, lead, m, q, dtype)
     static["info"] = return_info  # the residuals cost one more n·q product: only on request
     if method in ("omp", "omp_error"):
         pre = static.pop("precompute")
@@ -390,10 +411,7 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
                 static["gram"] = "host"
                 dynamic["gram_token"] = jnp.asarray(token, jnp.int32)
     if m == 0:  # empty batch: nothing to trace
-        alpha = jnp.zeros(lead + (q,), dtype)
-        info = CodingInfo(jnp.zeros(lead, jnp.int32), jnp.zeros(lead, dtype),
-                          jnp.ones(lead, bool))
-        return (alpha, info) if return_info else alpha
+        return _empty_codes(lead, q, dtype, return_info)
     try:
         alpha, info = _run_batch(_BatchEntry(False, method, tuple(sorted(static.items()))),
                                  (B, sqrt_w), F, dynamic)
@@ -402,10 +420,7 @@ def encode(frame, f, method: str = "omp", *, weights=None, return_info: bool = F
     finally:
         if "gram_token" in dynamic:
             _HostGramRows.release(int(dynamic["gram_token"]))
-    alpha = jnp.reshape(alpha, lead + (q,))
-    if not return_info:
-        return alpha
-    return alpha, jax.tree.map(lambda x: jnp.reshape(x, lead), info)
+    return _shaped_codes(alpha, info, lead, return_info)
 
 
 def decode(frame, alpha) -> jax.Array:
@@ -573,10 +588,7 @@ def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options)
                        f"{q * q * 8 / 2**30:.1f} GiB > DENSE_BUDGET_BYTES); use 'omp' or "
                        "'omp_error' for frames this large")
     if m == 0:
-        alpha = jnp.zeros(lead + (q,), dtype)
-        info = CodingInfo(jnp.zeros(lead, jnp.int32), jnp.zeros(lead, dtype),
-                          jnp.ones(lead, bool))
-        return (alpha, info) if return_info else alpha
+        return _empty_codes(lead, q, dtype, return_info)
     w64 = None if w is None else np.asarray(w, np.float64)
     token = None
     static["info"] = return_info
@@ -591,11 +603,7 @@ def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options)
         Bs = frame.to_scipy(w64)  # diag(√w) B, float64 CSR (n, q); q² fits the dense budget
         norms2 = np.asarray(Bs.multiply(Bs).sum(axis=0)).ravel()
         gram = jnp.asarray((Bs.T @ Bs).toarray(), dtype)
-    if "eps" in dynamic:
-        dynamic["eps"] = jnp.reshape(jnp.broadcast_to(jnp.asarray(dynamic["eps"], dtype), lead),
-                                     (m,))
-    if dynamic.get("init") is not None:
-        dynamic["init"] = jnp.reshape(jnp.asarray(dynamic["init"], dtype), (m, q))
+    _flatten_per_function(dynamic, lead, m, q, dtype)
     F = jnp.reshape(jnp.asarray(f, dtype), (m, n))
     wv = jnp.ones(n, dtype) if w is None else jnp.asarray(w, dtype)
     try:
@@ -607,10 +615,7 @@ def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options)
         if token is not None:
             _HostGramRows.release(token)
             release_free_memory()  # the transpose and row temporaries (see bsfjax._memory)
-    alpha = jnp.reshape(alpha, lead + (q,))
-    if not return_info:
-        return alpha
-    return alpha, jax.tree.map(lambda x: jnp.reshape(x, lead), info)
+    return _shaped_codes(alpha, info, lead, return_info)
 
 
 #: Cost of one sparse multiply-add of a host Gram row relative to one GEMM flop (measured on 2

@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .errors import BSFError
-from .sparse_frame import SparseFrame, sparse_atoms
+from .sparse_frame import SparseFrame, effective_taus, kernel_mask, sparse_atoms
 from .spectrum import Spectrum
 
 __all__ = ["Frame", "build_frame", "transfer_frame", "adaptive_taus", "prune_frame",
@@ -107,9 +107,7 @@ class Frame(eqx.Module):
     def effective_taus(self) -> jax.Array:
         """``(q,)`` the τ multiplying the raw eigenvalues: ``taus · Σ mass`` for
         ``"unit_area"``, ``taus`` for ``"raw"``.  (After a transfer, Σ mass is the target's.)"""
-        if self.tau_convention == "raw":
-            return self.taus
-        return self.taus * jnp.sum(self.mass, axis=-1, keepdims=True)
+        return effective_taus(self.taus, self.mass, self.tau_convention)
 
 
 # --------------------------------------------------------------------------- jitted kernels
@@ -122,10 +120,7 @@ _BINARIZE_BLOCK_ELEMS = 2**20
 
 def _binarize(evecs: jax.Array, coeffs: jax.Array, gammas: jax.Array) -> jax.Array:
     """``(n, q)`` atoms ``[|g| / max_v |g| ≥ γ]`` of ``g = evecs @ coeffs``, per column
-    (γ ``(q,)``), computed as ``|g| ≥ γ · max_v |g|``.
-
-    A column with ``max |g| = 0`` (a kernel that vanished, e.g. mapped to zero by C) gives an
-    all-zero atom rather than 0/0 = NaN.
+    (γ ``(q,)``), in the float dtype: the rule of :func:`~bsfjax.sparse_frame.kernel_mask`.
 
     Computed in blocks of ``w`` whole columns written into the result, so the ``(n, q)`` kernel
     matrix ``g`` never exists: one ``(n, w)`` block is multiplied, reduced and thresholded
@@ -138,24 +133,17 @@ def _binarize(evecs: jax.Array, coeffs: jax.Array, gammas: jax.Array) -> jax.Arr
     w = int(max(1, min(q, _BINARIZE_BLOCK_ELEMS // max(n, 1))))
     n_blocks = -(-q // w)
 
-    def block(cb, gb):
-        # "highest": full float32 products on GPU/TPU too (TF32/bf16 would move atoms at γ)
-        g = jnp.matmul(evecs, cb, precision=jax.lax.Precision.HIGHEST)
-        # max|g| as max(max g, −min g) and the division-free test |g| ≥ γ·max|g| (= |g|/max|g|
-        # ≥ γ up to one rounding at the threshold)
-        m = jnp.maximum(jnp.max(g, axis=0), -jnp.min(g, axis=0))
-        return ((jnp.abs(g) >= gb * m) & (m > 0)).astype(g.dtype)
-
+    dtype = jnp.result_type(evecs, coeffs)
     if n_blocks == 1:
-        return block(coeffs, gammas)
+        return kernel_mask(evecs, coeffs, gammas).astype(dtype)
 
     def body(i, out):
         start = jnp.minimum(i * w, q - w)
         cb = jax.lax.dynamic_slice_in_dim(coeffs, start, w, axis=1)
         gb = jax.lax.dynamic_slice_in_dim(gammas, start, w, axis=0)
-        return jax.lax.dynamic_update_slice_in_dim(out, block(cb, gb), start, axis=1)
+        atoms = kernel_mask(evecs, cb, gb).astype(dtype)
+        return jax.lax.dynamic_update_slice_in_dim(out, atoms, start, axis=1)
 
-    dtype = jnp.result_type(evecs, coeffs)
     return jax.lax.fori_loop(0, n_blocks, body, jnp.zeros((n, q), dtype))
 
 

@@ -85,9 +85,8 @@ class SparseFrame(eqx.Module):
 
     @property
     def effective_taus(self) -> jax.Array:
-        if self.tau_convention == "raw":
-            return self.taus
-        return self.taus * jnp.sum(self.mass, axis=-1, keepdims=True)
+        """As :attr:`bsfjax.Frame.effective_taus`."""
+        return effective_taus(self.taus, self.mass, self.tau_convention)
 
     def todense(self, dtype=None) -> jax.Array:
         """The ``(n, q)`` 0/1 matrix ``B`` (only for frames that fit in memory)."""
@@ -116,16 +115,34 @@ class SparseFrame(eqx.Module):
         return sp.csr_matrix((data, lists[valid], indptr), shape=(n, q))
 
 
+def effective_taus(taus, mass, tau_convention: str):
+    """The τ multiplying the raw eigenvalues of a frame's columns: ``taus · Σ mass`` for
+    ``"unit_area"``, ``taus`` for ``"raw"`` (shared by :class:`bsfjax.Frame` and
+    :class:`SparseFrame`)."""
+    if tau_convention == "raw":
+        return taus
+    return taus * jnp.sum(mass, axis=-1, keepdims=True)
+
+
 # --------------------------------------------------------------------------- build
 
 
-@jax.jit
-def _mask_block(evecs, coeffs, gammas):
-    """``(n, cb)`` bool atoms of a block of whole columns: ``|g| ≥ γ · max_v |g|``, ``g = Φ a``
-    (the rule and product of ``frame._binarize``; an all-zero column gives an empty atom)."""
+def kernel_mask(evecs, coeffs, gammas):
+    """``(n, c)`` bool atoms of the columns of ``g = evecs @ coeffs``: ``|g| ≥ γ · max_v |g|``
+    per column (γ ``(c,)``) — the binarization rule of both frame kinds (``frame._binarize``
+    writes it in column blocks, :func:`sparse_atoms` turns its blocks into lists).
+
+    ``max |g|`` is taken as ``max(max g, −min g)`` and the test is division-free (equal to
+    ``|g|/max|g| ≥ γ`` up to one rounding at the threshold); a column with ``max |g| = 0`` (a
+    kernel that vanished, e.g. mapped to zero by C) gives an empty atom rather than 0/0 = NaN.
+    """
+    # "highest": full float32 products on GPU/TPU too (TF32/bf16 would move atoms at γ)
     g = jnp.matmul(evecs, coeffs, precision=jax.lax.Precision.HIGHEST)
     m = jnp.maximum(jnp.max(g, axis=0), -jnp.min(g, axis=0))
     return (jnp.abs(g) >= gammas * m) & (m > 0)
+
+
+_mask_block = jax.jit(kernel_mask)  # one block of whole columns of the sparse build
 
 
 def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
