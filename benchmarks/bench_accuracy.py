@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 
 from bsfjax._files import write_text_atomic
-from bsfjax.baselines import CODERS
-from bsfjax.datasets import load_dataset
+from bsfjax._baselines import CODERS
+from bsfjax._datasets import load_dataset
 from bsfjax.experiments import pivot_markdown, summarize, transfer_experiment
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "faust"

@@ -43,7 +43,7 @@ import numpy as np
 
 import bsfjax
 from bsfjax._files import write_text_atomic
-from bsfjax.subdivision import subdivide
+from bsfjax._subdivision import subdivide
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_coding import random_regions  # noqa: E402

@@ -32,9 +32,9 @@ import numpy as np
 
 import bsfjax
 from bsfjax._files import write_text_atomic
-from bsfjax.datasets import load_dataset
+from bsfjax._datasets import load_dataset
 from bsfjax.experiments import N_LANDMARKS, _functions, prepare_shapes
-from bsfjax.highlevel import estimate_map
+from bsfjax import estimate_map
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 

@@ -26,7 +26,7 @@ import scipy.sparse.linalg
 
 import bsfjax
 from bsfjax._files import write_text_atomic
-from bsfjax.subdivision import subdivide
+from bsfjax._subdivision import subdivide
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 

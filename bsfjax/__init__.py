@@ -12,23 +12,24 @@ Pipeline, one module per stage (data flows downwards only)::
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from .errors import BSFError, MeshError
-from .laplacian import laplacian
-from .mesh import Mesh, MeshReport, load_mesh, mesh_report, save_mesh
-from .example import ExamplePair, example_mesh, example_pair
-from .spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_operators
-from .sampling import farthest_point_sampling
-from .sparse_frame import SparseFrame
-from .frame import (Frame, adaptive_taus, build_frame, prune_frame, transfer_frame,
+from ._errors import BSFError, MeshError
+from ._laplacian import laplacian
+from ._mesh import Mesh, MeshReport, load_mesh, mesh_report, save_mesh
+from ._example import ExamplePair, example_mesh, example_pair
+from ._spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_operators
+from ._sampling import farthest_point_sampling
+from ._sparse_frame import SparseFrame
+from ._frame import (Frame, adaptive_taus, build_frame, prune_frame, transfer_frame,
                     unique_atoms)
-from .coding import CodingInfo, decode, encode
-from .pipeline import PairResult, approximate, stack_spectra, transfer, transfer_pairs
-from .descriptors import hks, wks
-from .fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
-from .estimation import FmapWeights, estimate_fmap, fmap_energy
-from .geodesics import geodesic_distances, geodesic_error
-from .metrics import relative_error
-from .indicators import indicators_to_labels, labels_to_indicators, random_indicators
+from ._coding import CodingInfo, decode, encode
+from ._pipeline import PairResult, approximate, stack_spectra, transfer, transfer_pairs
+from ._descriptors import hks, wks
+from ._fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
+from ._estimation import FmapWeights, estimate_fmap, fmap_energy
+from ._geodesics import geodesic_distances, geodesic_error
+from ._metrics import relative_error
+from ._indicators import indicators_to_labels, labels_to_indicators, random_indicators
+from ._highlevel import LabelTransfer, MapEstimate, estimate_map, transfer_labels, transfer_values
 
 try:
     __version__ = _version("bsfjax")

@@ -12,7 +12,7 @@ import numbers
 import jax
 import numpy as np
 
-from .errors import BSFError
+from ._errors import BSFError
 
 __all__ = ["is_traced", "check_finite", "check_real", "check_int", "magnitude_limit"]
 

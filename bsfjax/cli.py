@@ -146,9 +146,9 @@ def _parse_landmarks(text: str | None):
 def _cmd_transfer(args) -> int:
     import numpy as np
 
-    from .highlevel import TRANSFER_METHODS, estimate_map, transfer_labels, transfer_values
-    from .mesh import load_mesh, save_mesh
-    from .spectrum import spectrum
+    from ._highlevel import TRANSFER_METHODS, estimate_map, transfer_labels, transfer_values
+    from ._mesh import load_mesh, save_mesh
+    from ._spectrum import spectrum
 
     if args.method not in TRANSFER_METHODS:
         raise CLIError(f"--method must be one of {', '.join(TRANSFER_METHODS)}, got {args.method!r}")
@@ -199,7 +199,7 @@ def _cmd_transfer(args) -> int:
         if p2p.shape != (target.n_vertices,) or p2p.min() < 0 or p2p.max() >= source.n_vertices:
             raise CLIError(f"p2p file {rest[0]}: expected {target.n_vertices} source vertex indices in "
                            f"[0, {source.n_vertices})")
-        from .fmap import fmap_from_p2p
+        from ._fmap import fmap_from_p2p
 
         C = np.asarray(fmap_from_p2p(sm, sn, p2p))
     elif kind == "estimate":
@@ -248,9 +248,9 @@ def _cmd_example(args) -> int:
     import numpy as np
 
     from ._files import write_text_atomic
-    from .demo import example_landmarks
-    from .example import example_pair
-    from .mesh import save_mesh
+    from ._demo import example_landmarks
+    from ._example import example_pair
+    from ._mesh import save_mesh
 
     if not 1 <= args.levels <= 4:
         raise CLIError(f"--levels must be in [1, 4], got {args.levels}")
@@ -279,7 +279,7 @@ def _cmd_example(args) -> int:
 
 
 def _cmd_demo(args) -> int:
-    from .demo import format_table, run_demo
+    from ._demo import format_table, run_demo
 
     print("bsfjax demo: the whole pipeline on the built-in example pair", flush=True)
     results = run_demo(args.out, k=args.k, n_functions=args.functions, seed=args.seed,
@@ -295,8 +295,8 @@ def _cmd_spectrum(args) -> int:
     import numpy as np
 
     from ._files import atomic_path
-    from .mesh import load_mesh
-    from .spectrum import spectrum
+    from ._mesh import load_mesh
+    from ._spectrum import spectrum
 
     if Path(args.out).suffix != ".npz":
         raise CLIError(f"--out {args.out}: use a .npz file name")

@@ -50,20 +50,20 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ._files import atomic_path
-from .baselines import CODERS, METHODS, PairInput, Params, run_baseline
-from .datasets import Dataset, load_dataset
-from .descriptors import wks
-from .errors import BSFError
-from .coding import decode, encode
-from .estimation import estimate_fmap
-from .fmap import fmap_from_p2p, fmap_to_p2p
-from .frame import build_frame, transfer_frame
-from .highlevel import estimate_map
-from .geodesics import geodesic_distances
-from .indicators import random_indicators
-from .metrics import relative_error
-from .sampling import farthest_point_sampling
-from .spectrum import Spectrum, spectrum
+from ._baselines import CODERS, METHODS, PairInput, Params, run_baseline
+from ._datasets import Dataset, load_dataset
+from ._descriptors import wks
+from ._errors import BSFError
+from ._coding import decode, encode
+from ._estimation import estimate_fmap
+from ._fmap import fmap_from_p2p, fmap_to_p2p
+from ._frame import build_frame, transfer_frame
+from ._highlevel import estimate_map
+from ._geodesics import geodesic_distances
+from ._indicators import random_indicators
+from ._metrics import relative_error
+from ._sampling import farthest_point_sampling
+from ._spectrum import Spectrum, spectrum
 
 __all__ = [
     "EXPERIMENTS", "DEFAULT_KS", "APPROX_METHODS", "TRANSFER_METHODS", "PARAMETER_SETS",
@@ -400,7 +400,7 @@ def frame_time_experiment(dataset: Dataset, *, pairs: int = 2, ks=(30, 90),
     is timed separately as ``eigenbasis``.  Times are medians of ``repeats`` runs after one
     warm-up (compilation) run; rows also give the first-call time.
     """
-    from .baselines import _saturate  # the same saturation as the baseline
+    from ._baselines import _saturate  # the same saturation as the baseline
 
     ks = _check_ks(ks)
     pair_ids = dataset.pairs(pairs, seed)

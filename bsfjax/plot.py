@@ -40,8 +40,8 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from ._files import atomic_path
-from .errors import BSFError
-from .mesh import Mesh
+from ._errors import BSFError
+from ._mesh import Mesh
 
 __all__ = [
     "VIEWS",

@@ -8,7 +8,7 @@ import pytest
 
 import bsfjax
 from bsfjax import BSFError
-from bsfjax.baselines import (METHODS, PairInput, Params, geodesic_ball_radii, product_basis,
+from bsfjax._baselines import (METHODS, PairInput, Params, geodesic_ball_radii, product_basis,
                               run_baseline)
 
 from .conftest import icosphere

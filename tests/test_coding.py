@@ -166,7 +166,7 @@ def test_gram_float64_binary_fast_path_is_exact():
     W = B * np.linspace(0.5, 1.5, 300)[:, None]  # not 0/1: the float64 GEMM
     with jax.enable_x64(True):
         for X in (B, W):
-            G = jax.jit(bsfjax.coding._gram)(jnp.asarray(X))
+            G = jax.jit(bsfjax._coding._gram)(jnp.asarray(X))
             assert G.dtype == jnp.float64
             np.testing.assert_allclose(G, X.T @ X, rtol=1e-14, atol=0)
 
@@ -286,7 +286,7 @@ def test_omp_chunked_batches_equal_one_chunk(method, monkeypatch):
     opts = {"sparsity": 6} if method == "omp" else {"eps": 0.2 * np.sum(F * F, 1), "max_atoms": 6}
     with jax.enable_x64(True):
         whole, info_w = encode(B, F, method, return_info=True, **opts)
-        monkeypatch.setattr(bsfjax.coding, "_OMP_CHUNK_ELEMS", 3 * 6 * 40)  # chunks of 3
+        monkeypatch.setattr(bsfjax._coding, "_OMP_CHUNK_ELEMS", 3 * 6 * 40)  # chunks of 3
         chunked, info_c = encode(B, F, method, return_info=True, **opts)
     np.testing.assert_allclose(chunked, whole, rtol=0, atol=1e-12)
     for a, b in zip(info_c, info_w):

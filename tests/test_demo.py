@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import bsfjax
-from bsfjax.demo import example_landmarks, format_table, run_demo
-from bsfjax.highlevel import estimate_map, transfer_labels, transfer_values
+from bsfjax._demo import example_landmarks, format_table, run_demo
+from bsfjax import estimate_map, transfer_labels, transfer_values
 
 
 @pytest.fixture(scope="module")

@@ -159,7 +159,7 @@ def test_orientation_term_matches_dense_least_squares(orientation):
 def test_orientation_operator(small):
     """O^f = Φᵀ W_f Φ; ⟨n × ∇f, ∇f⟩ = 0 on every face, so O^f kills f's own coefficients."""
     (m0, _, _), (s0, _, _), _ = small
-    from bsfjax.estimation import _geometry, _orient_ops
+    from bsfjax._estimation import _geometry, _orient_ops
 
     coef = np.random.default_rng(0).standard_normal((30, 2))
     f, g = (s0.evecs @ coef).T  # band-limited: exactly represented by their coefficients

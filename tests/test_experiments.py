@@ -10,7 +10,7 @@ import pytest
 import bsfjax
 from bsfjax import experiments as ex
 from bsfjax.cli import main
-from bsfjax.datasets import Dataset, load_dataset
+from bsfjax._datasets import Dataset, load_dataset
 
 from .conftest import data_path
 

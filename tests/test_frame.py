@@ -117,7 +117,7 @@ def test_build_matches_numpy(small, x64, gamma):
 def test_binarize_in_column_blocks_matches_numpy(small, monkeypatch, x64, width):
     """Column blocks of 1, 7 (the last one shifted to end at q = 90) and 89 atoms give the
     float64 reference's atoms, under jit and vmap."""
-    import bsfjax.frame as frame_mod
+    import bsfjax._frame as frame_mod
 
     specs, centers = small
     spec = specs[1.0]

@@ -14,7 +14,7 @@ import pytest
 
 import bsfjax
 from bsfjax import Mesh
-from bsfjax.pipeline import stack_spectra, transfer_pairs
+from bsfjax._pipeline import stack_spectra, transfer_pairs
 
 from .conftest import icosphere
 
@@ -96,7 +96,7 @@ SHARDED = textwrap.dedent("""
     import numpy as np, jax, sys
     sys.path.insert(0, {root!r})
     from tests.test_pipeline import _pairs, _inputs, _function_batch
-    from bsfjax.pipeline import transfer_pairs, _pairs_kernel
+    from bsfjax._pipeline import transfer_pairs, _pairs_kernel
     assert jax.device_count() == 4, jax.devices()
     src, tgt, n = _pairs()
     C, centers, F = _inputs(src, tgt, n)
@@ -109,7 +109,7 @@ SHARDED = textwrap.dedent("""
 def _function_batch(spec):
     """OMP codes of 7 functions (not a multiple of 4: padded) in a sparse and a dense frame, a
     least-squares approximation, and whether encode took the multi-device path."""
-    import bsfjax.coding as coding
+    import bsfjax._coding as coding
 
     centers = np.arange(0, spec.n_vertices, 9)
     F = (np.random.default_rng(5).random((7, spec.n_vertices)) < 0.3).astype(np.float32)

@@ -14,10 +14,10 @@ from matplotlib.image import imread
 from scipy.spatial import ConvexHull
 
 from bsfjax import plot
-from bsfjax.errors import BSFError
-from bsfjax.example import example_mesh, example_pair
-from bsfjax.mesh import Mesh
-from bsfjax.spectrum import interval_spectrum
+from bsfjax._errors import BSFError
+from bsfjax._example import example_mesh, example_pair
+from bsfjax._mesh import Mesh
+from bsfjax._spectrum import interval_spectrum
 
 
 @pytest.fixture(scope="module")

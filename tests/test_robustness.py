@@ -22,7 +22,7 @@ import pytest
 
 import bsfjax
 from bsfjax import BSFError, MeshError
-from bsfjax.mesh import clean_mesh, mesh_report
+from bsfjax._mesh import clean_mesh, mesh_report
 
 from .conftest import icosphere
 
@@ -381,10 +381,10 @@ def test_mesh_report_counts(tmp_path):
 
 
 @pytest.mark.parametrize("target,call", [
-    ("bsfjax.frame._build_core", lambda s: bsfjax.build_frame(s.spec, [99])),
-    ("bsfjax.coding._encode_batch", lambda s: bsfjax.encode(s.frame, s.F * np.nan)),
-    ("bsfjax.metrics._relative_error", lambda s: bsfjax.relative_error(s.F, s.F, -s.spec.mass)),
-    ("bsfjax.fmap._fmap_to_p2p_jit", lambda s: bsfjax.fmap_to_p2p(np.eye(5) * np.inf, s.spec,
+    ("bsfjax._frame._build_core", lambda s: bsfjax.build_frame(s.spec, [99])),
+    ("bsfjax._coding._encode_batch", lambda s: bsfjax.encode(s.frame, s.F * np.nan)),
+    ("bsfjax._metrics._relative_error", lambda s: bsfjax.relative_error(s.F, s.F, -s.spec.mass)),
+    ("bsfjax._fmap._fmap_to_p2p_jit", lambda s: bsfjax.fmap_to_p2p(np.eye(5) * np.inf, s.spec,
                                                                  s.spec)),
 ])
 def test_errors_come_before_tracing(ns, monkeypatch, target, call):

@@ -12,8 +12,8 @@ import pytest
 
 import bsfjax
 from bsfjax import BSFError, Frame, build_frame, decode, encode, transfer_frame
-from bsfjax.baselines import PairInput, Params, run_baseline
-from bsfjax.frame import ADAPTIVE_N_SCALES
+from bsfjax._baselines import PairInput, Params, run_baseline
+from bsfjax._frame import ADAPTIVE_N_SCALES
 
 from .conftest import data_path, icosphere
 
@@ -317,7 +317,7 @@ def test_params_bad_input(kwargs):
 
 @pytest.fixture(scope="module")
 def faust_pair():
-    from bsfjax.datasets import load_dataset
+    from bsfjax._datasets import load_dataset
     from bsfjax.experiments import _functions, prepare_shapes
 
     ds = load_dataset(data_path("faust"))
@@ -371,7 +371,7 @@ def body_dir(tmp_path_factory):
 def test_sparse_experiment_rows_and_reproduce(body_dir, tmp_path):
     from bsfjax import experiments as ex
     from bsfjax.cli import main
-    from bsfjax.datasets import load_dataset
+    from bsfjax._datasets import load_dataset
 
     out = tmp_path / "o"
     rc = main(["reproduce", "sparse", "--data", str(body_dir), "--out", str(out), "--pairs", "1",

@@ -7,8 +7,8 @@ import pytest
 
 import bsfjax
 from bsfjax import Mesh
-from bsfjax.mesh import mesh_edges
-from bsfjax.subdivision import subdivide
+from bsfjax._mesh import mesh_edges
+from bsfjax._subdivision import subdivide
 
 from .conftest import icosphere
 

@@ -40,8 +40,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._validate import check_real
-from .errors import BSFError
-from .spectrum import Spectrum
+from ._errors import BSFError
+from ._spectrum import Spectrum
 
 __all__ = ["hks", "wks", "hks_times", "wks_energies"]
 

@@ -39,7 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._memory import release_free_memory
-from .errors import BSFError
+from ._errors import BSFError
 
 __all__ = ["SparseFrame", "sparse_atoms", "ell_matmul", "ell_rmatmul", "sparse_gram",
            "AtomVertices", "atom_vertices", "atom_sums", "ell_gram_rows"]
@@ -147,7 +147,7 @@ _mask_block = jax.jit(kernel_mask)  # one block of whole columns of the sparse b
 
 def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
     """``(n, D)`` atom lists of ``B = [|g| ≥ γ · max_v |g|]`` for ``g = evecs @ coeffs`` (the
-    dense rule of :func:`bsfjax.frame._binarize`), never forming the ``(n, q)`` matrix.
+    dense rule of :func:`bsfjax._frame._binarize`), never forming the ``(n, q)`` matrix.
 
     One pass over blocks of whole columns (atoms), ``n × cb ≈ 2²⁴`` kernel values each: the
     device computes a block's mask (and its column maxima) while the host turns the previous

@@ -34,8 +34,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .errors import BSFError
-from .mesh import Mesh
+from ._errors import BSFError
+from ._mesh import Mesh
 
 __all__ = ["ExamplePair", "example_pair", "example_mesh", "LABEL_NAMES", "JOINTS", "POSES"]
 

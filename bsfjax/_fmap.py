@@ -42,8 +42,8 @@ import numpy as np
 from jax import lax
 
 from ._validate import check_finite
-from .errors import BSFError
-from .spectrum import Spectrum
+from ._errors import BSFError
+from ._spectrum import Spectrum
 
 __all__ = ["fmap_from_p2p", "fmap_to_p2p", "zoomout", "icp_refine", "nearest_neighbors"]
 

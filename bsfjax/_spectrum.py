@@ -22,9 +22,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg
 
 from ._files import atomic_path
-from .errors import BSFError, MeshError
-from .laplacian import MASS_TYPES, laplacian
-from .mesh import Mesh, n_components
+from ._errors import BSFError, MeshError
+from ._laplacian import MASS_TYPES, laplacian
+from ._mesh import Mesh, n_components
 
 __all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum"]
 

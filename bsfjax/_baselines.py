@@ -45,10 +45,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .coding import decode, encode
-from .errors import BSFError
-from .frame import build_frame, transfer_frame, unique_atoms
-from .spectrum import Spectrum
+from ._coding import decode, encode
+from ._errors import BSFError
+from ._frame import build_frame, transfer_frame, unique_atoms
+from ._spectrum import Spectrum
 
 __all__ = ["METHODS", "CODERS", "FRAME_TRANSFERS", "TRANSFER_ONLY", "Params", "PairInput", "BaselineResult",
            "run_baseline", "geodesic_ball_radii", "product_basis"]

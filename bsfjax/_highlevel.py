@@ -12,14 +12,14 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from .baselines import PairInput, run_baseline
-from .descriptors import wks
-from .errors import BSFError
-from .estimation import estimate_fmap
-from .fmap import fmap_from_p2p, fmap_to_p2p, zoomout
-from .indicators import labels_to_indicators
-from .sampling import farthest_point_sampling
-from .spectrum import Spectrum
+from ._baselines import PairInput, run_baseline
+from ._descriptors import wks
+from ._errors import BSFError
+from ._estimation import estimate_fmap
+from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
+from ._indicators import labels_to_indicators
+from ._sampling import farthest_point_sampling
+from ._spectrum import Spectrum
 
 __all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", "LabelTransfer",
            "TRANSFER_METHODS"]
@@ -96,7 +96,7 @@ def transfer_values(source: Spectrum, target: Spectrum, values, *, C=None, p2p=N
     ``frame_transfer="p2p"`` with ``p2p`` to pull the atoms back through the point map — the
     robust choice with an estimated map, see ``docs/results.md``).
     """
-    from .baselines import Params
+    from ._baselines import Params
 
     if method not in TRANSFER_METHODS:
         raise BSFError(f"method must be one of {TRANSFER_METHODS}, got {method!r}")

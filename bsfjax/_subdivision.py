@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import BSFError
-from .mesh import Mesh, mesh_edges
+from ._errors import BSFError
+from ._mesh import Mesh, mesh_edges
 
 __all__ = ["subdivide"]
 

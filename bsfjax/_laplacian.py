@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import BSFError, MeshError
-from .mesh import Mesh
+from ._errors import BSFError, MeshError
+from ._mesh import Mesh
 
 __all__ = ["laplacian", "cotangent_stiffness", "mass_matrix"]
 
@@ -137,6 +137,6 @@ def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp
                         "use laplacian(..., robust=True)")
     if bad.any():
         raise MeshError(f"{where}{int(bad.sum())} vertices have zero mass "
-                        "(unreferenced or only in zero-area faces; bsfjax.mesh.clean_mesh "
+                        "(unreferenced or only in zero-area faces; bsfjax._mesh.clean_mesh "
                         "removes them)")
     return W, A

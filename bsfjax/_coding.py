@@ -47,9 +47,9 @@ with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintaine
 from ._devices import map_over_devices, n_devices
 from ._memory import release_free_memory
 from ._validate import check_finite, magnitude_limit
-from .errors import BSFError
-from .frame import DENSE_BUDGET_BYTES, Frame
-from .sparse_frame import (SparseFrame, atom_sums, atom_vertices, ell_gram_rows, ell_matmul,
+from ._errors import BSFError
+from ._frame import DENSE_BUDGET_BYTES, Frame
+from ._sparse_frame import (SparseFrame, atom_sums, atom_vertices, ell_gram_rows, ell_matmul,
                            ell_rmatmul)
 
 __all__ = ["CodingInfo", "encode", "decode", "METHODS"]
@@ -568,7 +568,7 @@ def _encode_sparse(frame: SparseFrame, f, method, weights, return_info, options)
     the ``q × q`` Gram matrix is never formed — its full product would cost ``Σ_v D_v²``,
     e.g. ~50 G operations at 160K vertices.  ``lstsq``/``lasso`` do need ``G`` dense (host
     CSR product, then densified) and so are limited to frames with ``q² · 8`` bytes within
-    :data:`~bsfjax.frame.DENSE_BUDGET_BYTES`.  Correlations ``BᵀWf`` and residuals use the
+    :data:`~bsfjax._frame.DENSE_BUDGET_BYTES`.  Correlations ``BᵀWf`` and residuals use the
     chunked ELL products of ``sparse_frame.py``.  Needs a concrete frame.
     """
     n, q = frame.n_vertices, frame.n_atoms
@@ -677,7 +677,7 @@ class _CsrGramSource:
 
 class _EllGramSource:
     """Gram rows ``b_kᵀ W B`` of a :class:`SparseFrame` from its own atom lists (host view) and
-    their 16-bit transpose (:func:`~bsfjax.sparse_frame.atom_vertices`): about ``nnz · 2``
+    their 16-bit transpose (:func:`~bsfjax._sparse_frame.atom_vertices`): about ``nnz · 2``
     bytes besides the lists, where a float64 scipy CSR and its transpose took ``nnz · 24``.
 
     Without weights the rows are the exact overlap counts; with weights each term is

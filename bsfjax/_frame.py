@@ -38,9 +38,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .errors import BSFError
-from .sparse_frame import SparseFrame, effective_taus, kernel_mask, sparse_atoms
-from .spectrum import Spectrum
+from ._errors import BSFError
+from ._sparse_frame import SparseFrame, effective_taus, kernel_mask, sparse_atoms
+from ._spectrum import Spectrum
 
 __all__ = ["Frame", "build_frame", "transfer_frame", "adaptive_taus", "prune_frame",
            "unique_atoms", "TAU_CONVENTIONS", "ADAPTIVE_AREA_RANGE", "ADAPTIVE_N_SCALES",
@@ -120,7 +120,7 @@ _BINARIZE_BLOCK_ELEMS = 2**20
 
 def _binarize(evecs: jax.Array, coeffs: jax.Array, gammas: jax.Array) -> jax.Array:
     """``(n, q)`` atoms ``[|g| / max_v |g| ≥ γ]`` of ``g = evecs @ coeffs``, per column
-    (γ ``(q,)``), in the float dtype: the rule of :func:`~bsfjax.sparse_frame.kernel_mask`.
+    (γ ``(q,)``), in the float dtype: the rule of :func:`~bsfjax._sparse_frame.kernel_mask`.
 
     Computed in blocks of ``w`` whole columns written into the result, so the ``(n, q)`` kernel
     matrix ``g`` never exists: one ``(n, w)`` block is multiplied, reduced and thresholded

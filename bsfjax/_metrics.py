@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .errors import BSFError
+from ._errors import BSFError
 
 __all__ = ["relative_error"]
 

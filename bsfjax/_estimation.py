@@ -68,9 +68,9 @@ import numpy as np
 import optimistix as optx
 
 from ._validate import check_finite
-from .errors import BSFError
-from .mesh import Mesh
-from .spectrum import Spectrum
+from ._errors import BSFError
+from ._mesh import Mesh
+from ._spectrum import Spectrum
 
 __all__ = ["estimate_fmap", "FmapWeights", "fmap_energy", "LAPLACIAN_MASKS", "ORIENTATIONS"]
 

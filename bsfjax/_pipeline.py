@@ -16,11 +16,11 @@ import numpy as np
 
 from ._devices import pad_leading, shard_leading
 from ._validate import check_finite
-from .coding import decode, encode
-from .errors import BSFError
-from .frame import Frame, build_frame, transfer_frame
-from .sparse_frame import SparseFrame
-from .spectrum import Spectrum
+from ._coding import decode, encode
+from ._errors import BSFError
+from ._frame import Frame, build_frame, transfer_frame
+from ._sparse_frame import SparseFrame
+from ._spectrum import Spectrum
 
 __all__ = ["approximate", "transfer", "PairResult", "transfer_pairs", "stack_spectra"]
 

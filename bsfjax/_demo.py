@@ -25,7 +25,7 @@ import numpy as np
 
 from ._files import write_text_atomic
 from ._validate import check_int
-from .errors import BSFError
+from ._errors import BSFError
 
 __all__ = ["run_demo", "format_table", "example_landmarks"]
 
@@ -79,17 +79,17 @@ def run_demo(out_dir: str | Path | None = "bsfjax-demo", *, levels: int = 3, k: 
     """
     import jax.numpy as jnp
 
-    from .baselines import PairInput, run_baseline
-    from .descriptors import wks
-    from .estimation import estimate_fmap
-    from .example import example_pair
-    from .fmap import fmap_from_p2p, fmap_to_p2p, zoomout
-    from .frame import build_frame
-    from .geodesics import geodesic_error
-    from .indicators import labels_to_indicators, random_indicators
-    from .metrics import relative_error
-    from .sampling import farthest_point_sampling
-    from .spectrum import spectrum
+    from ._baselines import PairInput, run_baseline
+    from ._descriptors import wks
+    from ._estimation import estimate_fmap
+    from ._example import example_pair
+    from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
+    from ._frame import build_frame
+    from ._geodesics import geodesic_error
+    from ._indicators import labels_to_indicators, random_indicators
+    from ._metrics import relative_error
+    from ._sampling import farthest_point_sampling
+    from ._spectrum import spectrum
 
     # every argument is checked before the first (slow) stage runs
     check_int(k, "k", 2)
@@ -175,7 +175,7 @@ def _argmax_labels(values: np.ndarray, threshold: float = 0.5) -> tuple[np.ndarr
 
 def _figures(out: Path, pair, frame, centers, F, gt, outputs, timer) -> list[str]:
     from . import plot
-    from .sparse_frame import SparseFrame
+    from ._sparse_frame import SparseFrame
 
     names = pair.label_names
     files = {}

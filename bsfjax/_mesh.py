@@ -18,7 +18,7 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph
 
 from ._files import atomic_path
-from .errors import MeshError
+from ._errors import MeshError
 
 __all__ = ["Mesh", "MeshError", "MeshReport", "load_mesh", "save_mesh", "mesh_edges", "edge_graph",
            "graph_from_edges", "mesh_report", "n_components"]

@@ -30,9 +30,9 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph
 import scipy.sparse.linalg
 
-from .errors import BSFError
-from .laplacian import laplacian
-from .mesh import Mesh, edge_graph, mesh_edges
+from ._errors import BSFError
+from ._laplacian import laplacian
+from ._mesh import Mesh, edge_graph, mesh_edges
 
 __all__ = ["geodesic_distances", "geodesic_error", "GEODESIC_METHODS"]
 

@@ -30,9 +30,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph
 
-from .errors import BSFError
-from .laplacian import laplacian
-from .mesh import Mesh, graph_from_edges, mesh_edges
+from ._errors import BSFError
+from ._laplacian import laplacian
+from ._mesh import Mesh, graph_from_edges, mesh_edges
 
 __all__ = ["random_indicators", "labels_to_indicators", "indicators_to_labels"]
 

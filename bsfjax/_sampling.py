@@ -32,9 +32,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph
 
-from .errors import BSFError
-from .mesh import Mesh, edge_graph
-from .spectrum import Spectrum
+from ._errors import BSFError
+from ._mesh import Mesh, edge_graph
+from ._spectrum import Spectrum
 
 __all__ = ["farthest_point_sampling", "edge_graph", "n_samples"]
 
