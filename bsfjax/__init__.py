@@ -3,33 +3,65 @@
 Sparse representation and transfer of step functions on manifolds, after S. Melzi,
 "Sparse representation of step functions on manifolds", Computers & Graphics 82 (2019).
 
-Pipeline, one module per stage (data flows downwards only)::
+The public names, grouped by pipeline stage (data flows downwards only; one private module
+owns each step, see ``docs/architecture.md``)::
 
-    mesh.py        Mesh, load_mesh, save_mesh
-    laplacian.py   laplacian -> (W, A)
-    spectrum.py    Spectrum, spectrum, spectrum_from_operators, interval_spectrum
+    mesh        Mesh, load_mesh, save_mesh, mesh_report, example_pair        _mesh, _example
+    operators   laplacian -> (W, A)                                           _laplacian
+    spectrum    Spectrum, spectrum, spectrum_from_operators                   _spectrum
+    sampling    farthest_point_sampling, geodesic_distances                   _sampling, _geodesics
+    frame       Frame, SparseFrame, build_frame, transfer_frame, ...          _frame, ...
+    coding      OMP, ErrorOMP, LeastSquares, Lasso, encode, decode            _coding, ...
+    transfer    METHODS, BSF, ..., Pair, transfer, transfer_pairs             _methods, _transfer
+    maps        wks, hks, estimate_fmap, zoomout, fmap_to_p2p, estimate_map   _fmap, _estimation, ...
+    mesh level  transfer_values, transfer_labels                              _highlevel
+    metrics     relative_error, labels_to_indicators, random_indicators       _metrics, _indicators
+    experiments bsfjax.experiments (the paper's tables and figures), bsfjax.plot, bsfjax.cli
 """
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
 from ._errors import BSFError, MeshError
-from ._laplacian import laplacian
+
+# mesh
 from ._mesh import Mesh, MeshReport, load_mesh, mesh_report, save_mesh
 from ._example import ExamplePair, example_mesh, example_pair
-from ._spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_operators
+
+# operators and spectrum
+from ._laplacian import laplacian
+from ._spectrum import (Spectrum, interval_spectrum, spectrum, spectrum_from_operators,
+                        stack_spectra)
+
+# sampling
 from ._sampling import farthest_point_sampling
+from ._geodesics import geodesic_distances, geodesic_error
+
+# frame
 from ._sparse_frame import SparseFrame
 from ._frame import (Frame, adaptive_taus, build_frame, prune_frame, transfer_frame,
-                    unique_atoms)
+                     unique_atoms)
+
+# coding
 from ._coding import CodingInfo, decode, encode
-from ._pipeline import PairResult, approximate, stack_spectra, transfer, transfer_pairs
+from ._coders_shim import ErrorOMP, Lasso, LeastSquares, OMP
+
+# transfer
+from ._methods import (BSF, METHODS, AbstractMethod, GeodesicBalls, Pair, ProductBasis,
+                       PullBack, SaturatedHeat, SpectralProjection, as_method)
+from ._transfer import TransferResult, stack_pairs, transfer, transfer_pairs
+
+# functional maps
 from ._descriptors import hks, wks
 from ._fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
 from ._estimation import FmapWeights, estimate_fmap, fmap_energy
-from ._geodesics import geodesic_distances, geodesic_error
+
+# mesh-level entry points
+from ._highlevel import (LabelTransfer, MapEstimate, estimate_map, transfer_labels,
+                         transfer_values)
+
+# metrics and test functions
 from ._metrics import relative_error
 from ._indicators import indicators_to_labels, labels_to_indicators, random_indicators
-from ._highlevel import LabelTransfer, MapEstimate, estimate_map, transfer_labels, transfer_values
 
 try:
     __version__ = _version("bsfjax")
@@ -37,51 +69,29 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 __all__ = [
-    "relative_error",
-    "random_indicators",
-    "labels_to_indicators",
-    "indicators_to_labels",
-    "PairResult",
-    "approximate",
+    "BSFError", "MeshError",
+    # mesh
+    "Mesh", "MeshReport", "load_mesh", "mesh_report", "save_mesh", "ExamplePair",
+    "example_mesh", "example_pair",
+    # operators and spectrum
+    "laplacian", "Spectrum", "interval_spectrum", "spectrum", "spectrum_from_operators",
     "stack_spectra",
-    "transfer",
-    "transfer_pairs",
-    "CodingInfo",
-    "decode",
-    "encode",
-    "FmapWeights",
-    "estimate_fmap",
-    "fmap_energy",
-    "fmap_from_p2p",
-    "fmap_to_p2p",
-    "geodesic_distances",
-    "geodesic_error",
-    "hks",
-    "icp_refine",
-    "nearest_neighbors",
-    "wks",
-    "zoomout",
-    "ExamplePair",
-    "example_mesh",
-    "example_pair",
-    "BSFError",
-    "Frame",
-    "SparseFrame",
-    "build_frame",
-    "farthest_point_sampling",
-    "transfer_frame",
-    "adaptive_taus",
-    "prune_frame",
+    # sampling
+    "farthest_point_sampling", "geodesic_distances", "geodesic_error",
+    # frame
+    "Frame", "SparseFrame", "build_frame", "transfer_frame", "adaptive_taus", "prune_frame",
     "unique_atoms",
-    "Mesh",
-    "MeshReport",
-    "mesh_report",
-    "MeshError",
-    "Spectrum",
-    "interval_spectrum",
-    "laplacian",
-    "load_mesh",
-    "save_mesh",
-    "spectrum",
-    "spectrum_from_operators",
+    # coding
+    "CodingInfo", "encode", "decode", "OMP", "ErrorOMP", "LeastSquares", "Lasso",
+    # transfer
+    "METHODS", "AbstractMethod", "BSF", "SpectralProjection", "PullBack", "ProductBasis",
+    "GeodesicBalls", "SaturatedHeat", "as_method", "Pair", "TransferResult", "transfer",
+    "transfer_pairs", "stack_pairs",
+    # functional maps
+    "hks", "wks", "fmap_from_p2p", "fmap_to_p2p", "icp_refine", "nearest_neighbors", "zoomout",
+    "FmapWeights", "estimate_fmap", "fmap_energy",
+    # mesh level
+    "MapEstimate", "estimate_map", "LabelTransfer", "transfer_values", "transfer_labels",
+    # metrics
+    "relative_error", "indicators_to_labels", "labels_to_indicators", "random_indicators",
 ]

@@ -12,22 +12,19 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from ._baselines import PairInput, run_baseline
+from ._methods import (BSF, GeodesicBalls, PullBack, SaturatedHeat, SpectralProjection,
+                       as_method, method_name)
+from ._transfer import Pair, transfer
 from ._descriptors import wks
 from ._errors import BSFError
 from ._estimation import estimate_fmap
+from ._geodesics import geodesic_distances
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._indicators import labels_to_indicators
 from ._sampling import farthest_point_sampling
 from ._spectrum import Spectrum
 
-__all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", "LabelTransfer",
-           "TRANSFER_METHODS"]
-
-#: Methods usable between two meshes (``prod``/``geod``/``heat`` need extra inputs; see
-#: :mod:`bsfjax.baselines`).
-TRANSFER_METHODS = ("omp", "omp_error", "lstsq", "lasso", "std", "p2p")
-
+__all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", "LabelTransfer"]
 
 class MapEstimate(NamedTuple):
     C: np.ndarray  #: ``(k, k)`` functional map source → target
@@ -82,50 +79,63 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     return MapEstimate(C=C, p2p=p2p, C_initial=np.asarray(C0))
 
 
-def transfer_values(source: Spectrum, target: Spectrum, values, *, C=None, p2p=None,
-                    method: str = "omp", k: int | None = None, n_bsf: float | int = 0.05,
-                    seed: int = 0, mesh=None, **params) -> np.ndarray:
+def transfer_values(source: Spectrum, target: Spectrum, values, *, method="omp", C=None,
+                    p2p=None, k: int | None = None, centers=None, n_bsf: float | int = 0.05,
+                    seed: int = 0, mesh=None, **options) -> np.ndarray:
     """Transfer functions ``values`` ``(m, n_M)`` (or ``(n_M,)``) from source to target.
 
-    ``method`` is one of :data:`TRANSFER_METHODS`: a BSF coder (``"omp"``, ``"omp_error"``,
-    ``"lstsq"``, ``"lasso"``; frame with ``n_bsf`` centres by farthest point sampling on
-    ``mesh`` — the source :class:`~bsfjax.Mesh` — or on the spectral embedding when no mesh is
-    given), the spectral projection ``"std"``, or the pull-back ``"p2p"`` (needs ``p2p``).
-    ``C`` is ``(k, k)``; ``k`` defaults to its size.  Extra ``params`` go to
-    :class:`bsfjax.baselines.Params` (e.g. ``sparsity=20``, ``taus="adaptive"``, or
-    ``frame_transfer="p2p"`` with ``p2p`` to pull the atoms back through the point map — the
-    robust choice with an estimated map, see ``docs/results.md``).
-    """
-    from ._baselines import Params
+    The mesh-level entry point of :func:`bsfjax.transfer`: it samples the frame centres and
+    builds the :class:`~bsfjax.Pair`, then runs the one engine.
 
-    if method not in TRANSFER_METHODS:
-        raise BSFError(f"method must be one of {TRANSFER_METHODS}, got {method!r}")
+    **Arguments:**
+
+    - ``method``: a name of :data:`bsfjax.METHODS` or a method object (see
+      :func:`bsfjax.as_method`); ``**options`` are its options with a name (e.g.
+      ``sparsity=20``, ``taus="adaptive"``, ``frame_transfer="p2p"``).
+    - ``C``: ``(k_N, k)`` functional map (every method but ``"p2p"``); ``k`` defaults to its
+      column count.
+    - ``p2p``: ``(n_N,)`` point map target vertex → source vertex (``"p2p"``, and
+      ``frame_transfer="p2p"``).
+    - ``centers``: the frame centres; default ``n_bsf`` of them (a share or a count) by
+      farthest point sampling (``seed``) on ``mesh`` — the source :class:`~bsfjax.Mesh` — or
+      on the spectral embedding when no mesh is given.  With the same centres this equals
+      ``decode(transfer_frame(build_frame(source, centers), C, target), encode(...))``.
+    """
+    method = as_method(method, **options)
     f = np.asarray(values, dtype=float)
     single = f.ndim == 1
     f = f[None] if single else f
     if f.ndim != 2 or f.shape[1] != source.n_vertices:
         raise BSFError(f"values must have shape (n_source,) or (m, n_source) with n_source = "
                        f"{source.n_vertices}, got {np.shape(values)}")
-    if method == "p2p":
-        if p2p is None:
-            raise BSFError("method 'p2p' needs a point map (p2p)")
-        idx = np.asarray(p2p)
-        if idx.shape != (target.n_vertices,):
-            raise BSFError(f"p2p must have one source index per target vertex ({target.n_vertices}),"
-                           f" got shape {idx.shape}")
-        out = f[:, idx]
-        return out[0] if single else out
-    if C is None:
-        raise BSFError(f"method {method!r} needs a functional map C")
-    C = np.asarray(C)
-    k = int(C.shape[1]) if k is None else k
-    centers = None
-    if method not in ("std",):
+    if p2p is not None:
+        p2p = np.asarray(p2p)
+        if p2p.shape != (target.n_vertices,):
+            raise BSFError(f"p2p must have one source index per target vertex "
+                           f"({target.n_vertices}), got shape {p2p.shape}")
+    if C is None and not isinstance(method, PullBack):
+        raise BSFError(f"method {method_name(method)!r} needs a functional map C")
+    if C is not None:
+        C = np.asarray(C)
+        if C.ndim != 2:
+            raise BSFError(f"C must be a (k_N, k) matrix, got shape {C.shape}")
+    k = (int(C.shape[1]) if C is not None else 1) if k is None else k
+    needs_centers = isinstance(method, (BSF, GeodesicBalls, SaturatedHeat))
+    if needs_centers and centers is None:
         pts = mesh if mesh is not None else np.asarray(source.evecs[:, 1:4])
         centers = farthest_point_sampling(pts, n_bsf, seed=seed)
-    pair = PairInput(source=source.truncate(k), target=target.truncate(C.shape[0]), C=C,
-                     centers=centers, p2p=None if p2p is None else np.asarray(p2p))
-    res = run_baseline(method, pair, f, k=k, params=Params(**params))
+    distances = None
+    if isinstance(method, GeodesicBalls):
+        if mesh is None:
+            raise BSFError("method 'geod' needs the source mesh (mesh=) for geodesic distances")
+        distances = geodesic_distances(mesh, centers)
+    kn = C.shape[0] if C is not None else target.k
+    pair = Pair(source=source.truncate(k) if not isinstance(method, SpectralProjection)
+                or method.factor == 1 else source,
+                target=target.truncate(kn), C=C, centers=None if centers is None
+                else np.asarray(centers), p2p=p2p,
+                distances=distances)
+    res = transfer(method, pair, f, k=k)
     out = np.asarray(res.transferred)
     return out[0] if single else out
 

@@ -26,7 +26,7 @@ from ._errors import BSFError, MeshError
 from ._laplacian import MASS_TYPES, laplacian
 from ._mesh import Mesh, n_components
 
-__all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum"]
+__all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum", "stack_spectra"]
 
 #: Below this many vertices the generalized eigenproblem is solved densely (LAPACK).
 DENSE_LIMIT = 600
@@ -300,3 +300,15 @@ def interval_spectrum(n: int, k: int, length: float = 1.0) -> Spectrum:
     """
     W, a = interval_operators(n, length)
     return spectrum_from_operators(W, a, k)
+
+
+def stack_spectra(spectra) -> Spectrum:
+    """Stack spectra of equal ``(n, k)`` along a new leading axis, for ``vmap`` over shapes."""
+    spectra = list(spectra)
+    if not spectra or not all(isinstance(s, Spectrum) for s in spectra):
+        raise BSFError("spectra must be a non-empty sequence of bsfjax.Spectrum, got "
+                       f"{[type(s).__name__ for s in spectra]}")
+    shapes = {(s.n_vertices, s.k) for s in spectra}
+    if len(shapes) != 1:
+        raise BSFError(f"spectra to stack must share (n_vertices, k); got {sorted(shapes)}")
+    return jax.tree.map(lambda *x: np.stack(x), *spectra)

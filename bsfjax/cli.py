@@ -50,7 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "vertex index per target vertex) or 'fmap FILE' (k x k matrix, source -> target)")
     p.add_argument("--landmarks", help="landmark vertex indices 'i,j,...:i2,j2,...' (source:target)")
     p.add_argument("-k", type=int, default=30, help="spectral basis size (default 30)")
-    p.add_argument("--method", default="omp", help="omp (default), omp_error, lstsq, lasso, std, p2p")
+    p.add_argument("--method", default="omp",
+                   help="transfer method: omp (default), omp_error, lstsq, lasso (BSF coders), "
+                        "p2p (pull-back), std, prod, geod, heat")
     p.add_argument("--mesh-out", help="also write the target mesh coloured by the result (.ply)")
     p.add_argument("--threshold", type=float, default=0.5,
                    help="labels: a target vertex whose best score is below this is unassigned (-1)")
@@ -83,6 +85,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=lambda a: __import__("bsfjax.experiments", fromlist=["x"]).cli(a))
     return parser
+
+
+#: Methods that need inputs the command line does not give (``std2``: a 2k × 2k map).
+CLI_EXCLUDED = ("std2",)
 
 
 class CLIError(ValueError):
@@ -146,12 +152,14 @@ def _parse_landmarks(text: str | None):
 def _cmd_transfer(args) -> int:
     import numpy as np
 
-    from ._highlevel import TRANSFER_METHODS, estimate_map, transfer_labels, transfer_values
+    from ._highlevel import estimate_map, transfer_labels, transfer_values
+    from ._methods import METHODS
     from ._mesh import load_mesh, save_mesh
     from ._spectrum import spectrum
 
-    if args.method not in TRANSFER_METHODS:
-        raise CLIError(f"--method must be one of {', '.join(TRANSFER_METHODS)}, got {args.method!r}")
+    names = tuple(m for m in METHODS if m not in CLI_EXCLUDED)
+    if args.method not in names:
+        raise CLIError(f"--method must be one of {', '.join(names)}, got {args.method!r}")
     if Path(args.out).suffix not in (".npy", ".txt"):
         raise CLIError(f"--out {args.out}: use a .txt or .npy file name")
     if args.truth and not args.labels:

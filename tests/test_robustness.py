@@ -226,11 +226,12 @@ BAD_INPUTS = [
      BSFError, r"sources must be vertex indices in \[0, 42\), found range \[0, 99\]"),
     # --- pipeline
     ("transfer-pairs-nan-map", lambda s: bsfjax.transfer_pairs(
-        [s.spec], [s.spec], np.full((1, 10, 10), np.nan), s.centers[None], s.F[None]),
-     BSFError, r"C contains 100 NaN or infinite values"),
-    ("transfer-mismatched-frames", lambda s: bsfjax.transfer(
-        s.frame, bsfjax.build_frame(s.spec, s.centers[:2]), s.F),
-     BSFError, r"target_frame has 6 atoms but frame has 24"),
+        "omp", [bsfjax.Pair(s.spec, s.spec, np.full((10, 10), np.nan), centers=s.centers)],
+        s.F[None]),
+     BSFError, r"pair.C contains 100 NaN or infinite values"),
+    ("decode-mismatched-frames", lambda s: bsfjax.decode(
+        bsfjax.build_frame(s.spec, s.centers[:2]), bsfjax.encode(s.frame, s.F)),
+     BSFError, r"alpha must have shape \(\.\.\., q\) with q = 6 atoms"),
     ("stack-no-spectra", lambda s: bsfjax.stack_spectra([]), BSFError,
      r"spectra must be a non-empty sequence of bsfjax.Spectrum"),
     ("example-bad-levels", lambda s: bsfjax.example_mesh(levels=0), BSFError,
@@ -281,7 +282,7 @@ def _empty_atom_frame(s):
 def _zero_map_transfer(s):
     tf = bsfjax.transfer_frame(s.frame, np.zeros((10, 10)), s.spec)
     assert float(np.abs(np.asarray(tf.atoms)).sum()) == 0.0  # vanished columns: empty atoms
-    return tf.atoms, bsfjax.transfer(s.frame, tf, s.F)
+    return tf.atoms, bsfjax.decode(tf, bsfjax.encode(s.frame, s.F))
 
 
 def _unwritable_cache(s, tmp):

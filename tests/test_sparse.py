@@ -12,7 +12,7 @@ import pytest
 
 import bsfjax
 from bsfjax import BSFError, Frame, build_frame, decode, encode, transfer_frame
-from bsfjax._baselines import PairInput, Params, run_baseline
+from bsfjax import BSF, Pair, transfer
 from bsfjax._frame import ADAPTIVE_N_SCALES
 
 from .conftest import data_path, icosphere
@@ -116,7 +116,7 @@ def test_paper_default_unchanged(sphere):
     b = build_frame(spec, c, (1e-3, 5e-3, 1e-2), 0.75, prune=False)
     np.testing.assert_array_equal(a.atoms, b.atoms)
     assert a.columns is None and a.n_atoms == 3 * len(c)
-    assert Params().taus == (1e-3, 5e-3, 1e-2) and not Params().prune
+    assert BSF().taus == (1e-3, 5e-3, 1e-2) and not BSF().prune
 
 
 # ------------------------------------------------------------------------------ hygiene
@@ -285,9 +285,10 @@ def test_baseline_adaptive_prune_and_p2p_transfer(sphere):
     # the target is the source with its vertices permuted: target vertex i = source perm[i]
     tgt = bsfjax.Spectrum(spec.evals, spec.evecs[perm], spec.mass[perm])
     C = np.asarray(bsfjax.fmap_from_p2p(spec, tgt, perm))
-    pair = PairInput(source=spec, target=tgt, C=C, centers=c, p2p=perm)
-    params = Params(taus="adaptive", prune=True, frame_transfer="p2p", sparsity=8)
-    res = run_baseline("omp", pair, F, k=30, params=params)
+    pair = Pair(source=spec, target=tgt, C=C, centers=c, p2p=perm)
+    params = bsfjax.as_method("omp", taus="adaptive", prune=True, frame_transfer="p2p",
+                              sparsity=8)
+    res = transfer(params, pair, F, k=30)
     with jax.enable_x64(True):
         fr = build_frame(spec, c, "adaptive")
         keep, _ = bsfjax.unique_atoms(fr)
@@ -298,18 +299,16 @@ def test_baseline_adaptive_prune_and_p2p_transfer(sphere):
     np.testing.assert_allclose(res.transferred, np.asarray(res.approximation)[:, perm],
                                atol=1e-6)
     with pytest.raises(BSFError, match="frame_transfer='p2p' needs pair.p2p"):
-        run_baseline("omp", PairInput(source=spec, target=tgt, C=C, centers=c), F, k=30,
-                     params=params)
-    lt = run_baseline("lasso", pair, F, k=30, params=Params(lasso_target=6, lasso_maxiter=500),
-                      transfer=False)
+        transfer(params, Pair(source=spec, target=tgt, C=C, centers=c), F, k=30)
+    lt = transfer("lasso", pair, F, k=30, target_atoms=6, maxiter=500, transfer=False)
     assert np.isfinite(np.asarray(lt.approximation)).all()
 
 
 @pytest.mark.parametrize("kwargs", [{"taus": "adapt"}, {"prune": 1}, {"frame_transfer": "soft"},
-                                    {"lasso_target": 0}])
-def test_params_bad_input(kwargs):
+                                    {"target_atoms": 0}])
+def test_method_options_bad_input(kwargs):
     with pytest.raises(BSFError):
-        Params(**kwargs)
+        bsfjax.as_method("lasso", **kwargs)
 
 
 # ------------------------------------------------------------------------------ FAUST claims

@@ -1,4 +1,4 @@
-"""Pipeline helpers: approximate, transfer, and the vmapped / sharded multi-pair pipeline."""
+"""The transfer engine: the manual route, the vmapped multi-pair run and its device sharding."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import pytest
 
 import bsfjax
 from bsfjax import Mesh
-from bsfjax._pipeline import stack_spectra, transfer_pairs
+from bsfjax import stack_spectra, transfer_pairs
 
 from .conftest import icosphere
 
@@ -44,31 +44,37 @@ def _inputs(src, tgt, n, m=4, seed=1):
     return np.asarray(C), centers, F
 
 
-def test_approximate_and_transfer_compose(pairs):
+def _stack(src, tgt, C, centers):
+    return [bsfjax.Pair(source=s, target=t, C=c, centers=ctr)
+            for s, t, c, ctr in zip(src, tgt, C, centers)]
+
+
+def test_transfer_is_the_manual_route(pairs):
+    """transfer == decode(transfer_frame(frame, C, N), encode(frame, f)) for the same frame."""
     src, tgt, n = pairs
-    frame = bsfjax.build_frame(src[0], np.arange(0, n, 20))
-    F = (np.random.default_rng(0).random((3, n)) < 0.5).astype(np.float32)
-    alpha = bsfjax.encode(frame, F, "omp", sparsity=5)
-    np.testing.assert_array_equal(np.asarray(bsfjax.approximate(frame, F, "omp", sparsity=5)),
+    C, centers, F = _inputs(src, tgt, n)
+    frame = bsfjax.build_frame(src[0], centers[0])
+    alpha = bsfjax.encode(frame, F[0], "omp", sparsity=5)
+    res = bsfjax.transfer("omp", bsfjax.Pair(src[0], tgt[0], C[0], centers=centers[0]), F[0],
+                          sparsity=5)
+    np.testing.assert_array_equal(np.asarray(res.codes), np.asarray(alpha))
+    np.testing.assert_array_equal(np.asarray(res.approximation),
                                   np.asarray(bsfjax.decode(frame, alpha)))
-    same = bsfjax.transfer_frame(frame, np.eye(src[0].k), src[0])  # identity map onto itself
-    np.testing.assert_array_equal(np.asarray(bsfjax.transfer(frame, same, F, "omp", sparsity=5)),
-                                  np.asarray(bsfjax.approximate(frame, F, "omp", sparsity=5)))
-    other = bsfjax.build_frame(src[0], np.arange(0, n, 40))
-    with pytest.raises(ValueError, match="target_frame has"):
-        bsfjax.transfer(frame, other, F)
+    tframe = bsfjax.transfer_frame(frame, C[0], tgt[0])
+    np.testing.assert_array_equal(np.asarray(res.transferred),
+                                  np.asarray(bsfjax.decode(tframe, alpha)))
 
 
 def test_transfer_pairs_matches_per_pair_calls(pairs):
     src, tgt, n = pairs
     C, centers, F = _inputs(src, tgt, n)
-    out = transfer_pairs(src, tgt, C, centers, F, method="omp", sparsity=6)
-    assert out.alpha.shape == (3, 4, 48) and out.transferred.shape == (3, 4, n)
+    out = transfer_pairs("omp", _stack(src, tgt, C, centers), F, sparsity=6)
+    assert out.codes.shape == (3, 4, 48) and out.transferred.shape == (3, 4, n)
     for p in range(3):
         frame = bsfjax.build_frame(src[p], centers[p])
         tframe = bsfjax.transfer_frame(frame, C[p], tgt[p])
         alpha = bsfjax.encode(frame, F[p], "omp", sparsity=6)
-        np.testing.assert_allclose(np.asarray(out.alpha[p]), np.asarray(alpha), rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(np.asarray(out.codes[p]), np.asarray(alpha), rtol=1e-5, atol=1e-6)
         np.testing.assert_allclose(np.asarray(out.transferred[p]),
                                    np.asarray(bsfjax.decode(tframe, alpha)), rtol=1e-5, atol=1e-5)
         np.testing.assert_allclose(np.asarray(out.approximation[p]),
@@ -78,31 +84,38 @@ def test_transfer_pairs_matches_per_pair_calls(pairs):
 def test_transfer_pairs_validates(pairs):
     src, tgt, n = pairs
     C, centers, F = _inputs(src, tgt, n)
-    with pytest.raises(ValueError, match="C must have shape"):
-        transfer_pairs(src, tgt, C[:, :5], centers, F)
+    stacked = _stack(src, tgt, C, centers)
+    with pytest.raises(ValueError, match="k_M = 5"):
+        transfer_pairs("omp", stacked, F, k=5)
     with pytest.raises(ValueError, match="f must have shape"):
-        transfer_pairs(src, tgt, C, centers, F[..., :-1])
+        transfer_pairs("omp", stacked, F[..., :-1])
     with pytest.raises(ValueError, match="NaN"):
-        transfer_pairs(src, tgt, C, centers, np.where(F > 0, np.nan, 0))
+        transfer_pairs("omp", stacked, np.where(F > 0, np.nan, 0))
     with pytest.raises(ValueError, match="centers must"):
-        transfer_pairs(src, tgt, C, centers + n, F)
-    with pytest.raises(ValueError, match="2 targets"):
-        transfer_pairs(src, tgt[:2], C, centers, F)
+        transfer_pairs("omp", _stack(src, tgt, C, centers + n), F)
+    with pytest.raises(ValueError, match="same fields and shapes"):
+        transfer_pairs("omp", stacked[:2] + [bsfjax.Pair(src[0], tgt[0], C[0][:5])], F)
     with pytest.raises(ValueError, match="share"):
         stack_spectra([src[0], src[0].truncate(5)])
+    with pytest.raises(ValueError, match="method must be one of"):
+        bsfjax.transfer("fourier", stacked[0], F[0])
+    with pytest.raises(ValueError, match="options go with a method name"):
+        bsfjax.transfer(bsfjax.BSF(), stacked[0], F[0], sparsity=3)
 
 
 SHARDED = textwrap.dedent("""
     import numpy as np, jax, sys
     sys.path.insert(0, {root!r})
-    from tests.test_pipeline import _pairs, _inputs, _function_batch
-    from bsfjax._pipeline import transfer_pairs, _pairs_kernel
+    from tests.test_transfer import _pairs, _inputs, _function_batch, _stack
+    from bsfjax import transfer_pairs
     assert jax.device_count() == 4, jax.devices()
     src, tgt, n = _pairs()
     C, centers, F = _inputs(src, tgt, n)
-    out = transfer_pairs(src, tgt, C, centers, F, method="omp", sparsity=6)
-    np.savez({path!r}, alpha=np.asarray(out.alpha), transferred=np.asarray(out.transferred),
-             devices=len(out.alpha.sharding.device_set), **_function_batch(src[0]))
+    out = transfer_pairs("omp", _stack(src, tgt, C, centers), F, sparsity=6, weights=None)
+    area = transfer_pairs("omp", _stack(src, tgt, C, centers), F, sparsity=6)
+    np.savez({path!r}, alpha=np.asarray(out.codes), transferred=np.asarray(out.transferred),
+             alpha_area=np.asarray(area.codes),
+             devices=len(out.codes.sharding.device_set), **_function_batch(src[0]))
 """)
 
 
@@ -119,7 +132,7 @@ def _function_batch(spec):
         a, info = bsfjax.encode(frame, F, "omp", weights="area", return_info=True)
         out[f"{kind}_omp"] = np.asarray(a)
         out[f"{kind}_omp_res"] = np.asarray(info.residual)
-    out["dense_approx"] = np.asarray(bsfjax.approximate(frame, F, "lstsq"))
+    out["dense_approx"] = np.asarray(bsfjax.decode(frame, bsfjax.encode(frame, F, "lstsq")))
     seen = []
     orig = coding.map_over_devices
     coding.map_over_devices = lambda *a: seen.append(1) or orig(*a)
@@ -133,10 +146,12 @@ def _function_batch(spec):
 
 def test_four_cpu_devices_give_identical_results(pairs, tmp_path):
     """Sharding the pair axis (3 pairs: padded to 4) and the function axis of encode (7
-    functions: padded to 8) over 4 forced host devices changes nothing."""
+    functions: padded to 8) over 4 forced host devices changes nothing: Euclidean codes bit for
+    bit, area-weighted codes the same atoms with values equal to float32 rounding."""
     src, tgt, n = pairs
     C, centers, F = _inputs(src, tgt, n)
-    single = transfer_pairs(src, tgt, C, centers, F, method="omp", sparsity=6)
+    single = transfer_pairs("omp", _stack(src, tgt, C, centers), F, sparsity=6, weights=None)
+    area = transfer_pairs("omp", _stack(src, tgt, C, centers), F, sparsity=6)
     path = tmp_path / "sharded.npz"
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
@@ -147,7 +162,12 @@ def test_four_cpu_devices_give_identical_results(pairs, tmp_path):
     assert int(ref["encode_sharded"]) == 0  # one device here: the plain path
     with np.load(path) as z:
         assert int(z["devices"]) == 4 and int(z["encode_sharded"]) == 1
-        np.testing.assert_array_equal(z["alpha"], np.asarray(single.alpha))
+        np.testing.assert_array_equal(z["alpha"], np.asarray(single.codes))
+        # area-weighted codes (the default): the same atoms, values to float32 rounding (XLA
+        # fuses the √w row scaling differently for 1 and 3 pairs per device)
+        a1, a4 = np.asarray(area.codes), z["alpha_area"]
+        np.testing.assert_array_equal(a4 != 0, a1 != 0)
+        np.testing.assert_allclose(a4, a1, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(z["transferred"], np.asarray(single.transferred), rtol=1e-6, atol=1e-6)
         for key, value in ref.items():
             if key == "encode_sharded":

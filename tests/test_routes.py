@@ -1,0 +1,93 @@
+"""Every route to a transfer gives the same numbers, for every method and option.
+
+Routes: the engine :func:`bsfjax.transfer`; its vmap :func:`bsfjax.transfer_pairs`; the
+mesh-level :func:`bsfjax.transfer_values` (with ``centers=``) and :func:`bsfjax.transfer_labels`;
+for the BSF the manual route ``decode(transfer_frame(frame, C, N), encode(frame, f, coder))``;
+and the command line ``bsfjax transfer``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import bsfjax
+from bsfjax import Pair, transfer, transfer_labels, transfer_pairs, transfer_values
+from bsfjax.cli import main
+
+K = 16
+
+#: (method, options) — every method, and every BSF option beside its default.
+CASES = [
+    ("omp", {}), ("omp", {"sparsity": 4}), ("omp", {"weights": None}),
+    ("omp", {"taus": "adaptive", "prune": True}), ("omp", {"frame_transfer": "p2p"}),
+    ("omp_error", {}), ("lstsq", {}), ("lasso", {"maxiter": 300}),
+    ("std", {}), ("p2p", {}), ("prod", {}), ("heat", {}), ("geod", {}),
+]
+
+
+@pytest.fixture(scope="module")
+def case():
+    pair = bsfjax.example_pair(levels=1)
+    sm, sn = bsfjax.spectrum(pair.source, K), bsfjax.spectrum(pair.target, K)
+    gt = np.asarray(pair.p2p)
+    C = np.asarray(bsfjax.fmap_from_p2p(sm, sn, gt))
+    centers = bsfjax.farthest_point_sampling(pair.source, 0.05)
+    F = np.asarray(bsfjax.labels_to_indicators(pair.labels), np.float32)
+    dist = np.asarray(bsfjax.geodesic_distances(pair.source, centers))
+    return pair, sm, sn, gt, C, centers, F, dist
+
+
+def _manual(method, sm, sn, C, gt, centers, F):
+    """The array-level route for the BSF methods, or None."""
+    m = bsfjax.as_method(method[0], **method[1])
+    if not isinstance(m, bsfjax.BSF):
+        return None
+    frame = bsfjax.build_frame(sm, centers, m.taus, m.gamma, tau_convention=m.tau_convention)
+    if m.prune:
+        frame = bsfjax.prune_frame(frame)
+    alpha = bsfjax.encode(frame, F, m.coder)
+    p2p = gt if m.frame_transfer == "p2p" else None
+    return np.asarray(bsfjax.decode(bsfjax.transfer_frame(frame, C, sn, p2p=p2p), alpha))
+
+
+@pytest.mark.parametrize("method,options", CASES, ids=[f"{m}-{'-'.join(o) or 'default'}"
+                                                         for m, o in CASES])
+def test_every_route_gives_the_same_numbers(case, method, options):
+    pair, sm, sn, gt, C, centers, F, dist = case
+    p = Pair(sm, sn, C, p2p=gt, centers=centers, distances=dist)
+    engine = np.asarray(transfer(method, p, F, **options).transferred)
+    assert engine.shape == (F.shape[0], sn.n_vertices) and np.all(np.isfinite(engine))
+    # vmap over two stacked copies of the pair
+    stacked = np.asarray(transfer_pairs(method, [p, p], np.stack([F, F]), **options).transferred)
+    np.testing.assert_allclose(stacked[0], engine, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(stacked[1], engine, rtol=1e-5, atol=1e-5)
+    # mesh level, same centres: the same jitted engine, bit for bit
+    values = transfer_values(sm, sn, F, method=method, C=C, p2p=gt, centers=centers,
+                             mesh=pair.source, **options)
+    np.testing.assert_array_equal(values, engine)
+    labels = transfer_labels(sm, sn, pair.labels, method=method, C=C, p2p=gt, centers=centers,
+                             mesh=pair.source, **options)
+    np.testing.assert_array_equal(labels.scores, engine)
+    manual = _manual((method, options), sm, sn, C, gt, centers, F)
+    if manual is not None:
+        np.testing.assert_allclose(manual, engine, rtol=1e-4, atol=1e-4)
+
+
+@pytest.mark.parametrize("method", ["omp", "lstsq", "std", "p2p"])
+def test_command_line_is_the_same_route(case, method, tmp_path):
+    pair, sm, sn, gt, C, centers, F, dist = case
+    src, tgt = tmp_path / "s.off", tmp_path / "t.off"
+    bsfjax.save_mesh(src, pair.source)
+    bsfjax.save_mesh(tgt, pair.target)
+    ms, mt = bsfjax.load_mesh(src), bsfjax.load_mesh(tgt)
+    s2, t2 = bsfjax.spectrum(ms, K), bsfjax.spectrum(mt, K)
+    np.save(tmp_path / "f.npy", F.T)
+    np.savetxt(tmp_path / "p2p.txt", gt, fmt="%d")
+    out = tmp_path / "out.npy"
+    assert main(["transfer", str(src), str(tgt), "--function", str(tmp_path / "f.npy"),
+                 "--map", "p2p", str(tmp_path / "p2p.txt"), "-k", str(K), "--method", method,
+                 "--out", str(out)]) == 0
+    C2 = np.asarray(bsfjax.fmap_from_p2p(s2, t2, gt))
+    want = transfer_values(s2, t2, F, method=method, C=C2, p2p=gt, mesh=ms)
+    np.testing.assert_allclose(np.load(out).T, want, rtol=1e-6, atol=1e-6)
