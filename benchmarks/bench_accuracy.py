@@ -21,8 +21,7 @@ from pathlib import Path
 
 from bsfjax._files import write_text_atomic
 from bsfjax._baselines import CODERS
-from bsfjax._datasets import load_dataset
-from bsfjax.experiments import pivot_markdown, summarize, transfer_experiment
+from bsfjax.experiments import load_dataset, pivot_markdown, summarize, transfer_experiment
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "faust"
 

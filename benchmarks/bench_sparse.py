@@ -32,8 +32,7 @@ import numpy as np
 
 import bsfjax
 from bsfjax._files import write_text_atomic
-from bsfjax._datasets import load_dataset
-from bsfjax.experiments import N_LANDMARKS, _functions, prepare_shapes
+from bsfjax.experiments import N_LANDMARKS, _functions, load_dataset, prepare_shapes
 from bsfjax import estimate_map
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"

@@ -69,8 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("reproduce", help="run one of the paper's experiments (tables 1-5, "
                        "figures 7 and 10) or the 'sparse' study on a data folder; writes CSV, "
                        "Markdown and PNG")
-    p.add_argument("name", choices=("table1", "table2", "fig7", "table3", "table4", "table5",
-                                    "fig10", "sparse"), help="experiment")
+    from .experiments import EXPERIMENTS  # the registry: one entry per experiment
+
+    p.add_argument("name", choices=tuple(EXPERIMENTS), help="experiment")
     p.add_argument("--data", required=True, help="folder of meshes with ground truth (FAUST-style "
                    "shared vertex order, or corres/<name>.vts files; class subfolders for TOSCA)")
     p.add_argument("--out", required=True, help="output folder")

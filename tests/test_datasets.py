@@ -7,7 +7,7 @@ import pytest
 
 import bsfjax
 from bsfjax import BSFError
-from bsfjax._datasets import load_dataset
+from bsfjax.experiments import load_dataset
 
 from .conftest import data_path, icosphere
 

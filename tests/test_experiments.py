@@ -10,7 +10,8 @@ import pytest
 import bsfjax
 from bsfjax import experiments as ex
 from bsfjax.cli import main
-from bsfjax._datasets import Dataset, load_dataset
+from bsfjax.experiments import Dataset, load_dataset
+from bsfjax.experiments.fig10 import _spread_markdown
 
 from .conftest import data_path
 
@@ -99,7 +100,7 @@ def test_tosca_and_parameter_study(tmp_path, body_dir):
     assert {(r["parameter"], r["method"]) for r in rows} >= {("gamma", "lasso"),
                                                              ("sparsity", "omp")}
     assert not any(r["parameter"] == "sparsity" and r["method"] != "omp" for r in rows)
-    md = ex._spread_markdown(rows)
+    md = _spread_markdown(rows)
     assert "| omp |" in md
 
 

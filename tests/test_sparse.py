@@ -3,8 +3,6 @@ the sparse-coding claims on FAUST (fixed seeds, small sizes)."""
 
 from __future__ import annotations
 
-import csv
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -316,8 +314,7 @@ def test_method_options_bad_input(kwargs):
 
 @pytest.fixture(scope="module")
 def faust_pair():
-    from bsfjax._datasets import load_dataset
-    from bsfjax.experiments import _functions, prepare_shapes
+    from bsfjax.experiments import _functions, load_dataset, prepare_shapes
 
     ds = load_dataset(data_path("faust"))
     a, b = ds.pairs(1, 0)[0]  # tr_reg_000 → tr_reg_012 (identity ground truth)
@@ -353,52 +350,3 @@ def test_adaptive_sparse_codes_beat_the_projection_on_faust(faust_pair):
     assert out["adaptive", "omp"][1] <= 0.85 * std_tr
     assert out["adaptive", "lstsq"][0] <= 0.6 * std_app
     assert out["adaptive", "omp"][0] < out["paper", "omp"][0]
-
-
-# ------------------------------------------------------------------------------ experiment
-
-
-@pytest.fixture(scope="module")
-def body_dir(tmp_path_factory):
-    d = tmp_path_factory.mktemp("body9")
-    pair = bsfjax.example_pair(levels=2)
-    bsfjax.save_mesh(d / "a.off", pair.source)
-    bsfjax.save_mesh(d / "b.off", pair.target)
-    return d
-
-
-def test_sparse_experiment_rows_and_reproduce(body_dir, tmp_path):
-    from bsfjax import experiments as ex
-    from bsfjax.cli import main
-    from bsfjax._datasets import load_dataset
-
-    out = tmp_path / "o"
-    rc = main(["reproduce", "sparse", "--data", str(body_dir), "--out", str(out), "--pairs", "1",
-               "--functions", "2", "--k", "8", "--no-progress", "--cache", str(tmp_path / "c")])
-    assert rc == 0
-    for suffix in ("csv", "md", "png", "json"):
-        assert (out / f"sparse.{suffix}").exists()
-    md = (out / "sparse.md").read_text()
-    assert "E_app, adaptive, lstsq" in md and "transfer error" in md
-    with open(out / "sparse.csv") as fh:
-        rows = list(csv.DictReader(fh))
-    std = [r for r in rows if r["method"] == "std"]
-    # sparsities ≤ k: (5,) ∪ {k = 8}; std: 2 sizes × 2 maps × 2 functions;
-    # per frame: (omp S = 5 + lstsq) × 3 transfers × 2 functions
-    assert len(std) == 2 * 2 * 2
-    assert len(rows) == len(std) + 2 * 2 * 3 * 2
-    assert {r["frame_transfer"] for r in rows} == {"-", "binary", "p2p"}
-    for r in rows:
-        if r["method"] == "omp":
-            assert int(r["nonzeros"]) <= int(r["sparsity"]) == 5
-        assert np.isfinite(float(r["error"])) and np.isfinite(float(r["approx_error"]))
-    # the projection rows at k agree with table 1's std
-    t1 = ex.approximation_experiment(load_dataset(body_dir), pairs=1, functions=2, ks=(8,),
-                                     methods=("std",), cache_dir=tmp_path / "c",
-                                     progress=False)
-    np.testing.assert_allclose(sorted(float(r["approx_error"]) for r in std
-                                      if r["sparsity"] == "8" and r["maps"] == "gt"),
-                               sorted(r["error"] for r in t1), rtol=1e-4)
-    with pytest.raises(BSFError, match="sparsities"):
-        ex.sparse_experiment(load_dataset(body_dir), pairs=1, functions=1, k=8,
-                             sparsities=(10,), progress=False)

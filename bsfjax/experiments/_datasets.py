@@ -41,8 +41,8 @@ from pathlib import Path
 import numpy as np
 import scipy.spatial
 
-from ._errors import BSFError, MeshError
-from ._mesh import Mesh, load_mesh
+from .._errors import BSFError, MeshError
+from .._mesh import Mesh, load_mesh
 
 __all__ = ["Dataset", "ShapeEntry", "load_dataset", "MESH_SUFFIXES"]
 
