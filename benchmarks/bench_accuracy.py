@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from bsfjax._files import write_text_atomic
-from bsfjax._baselines import CODERS
+from bsfjax.experiments import CODERS
 from bsfjax.experiments import load_dataset, pivot_markdown, summarize, transfer_experiment
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "faust"

@@ -11,8 +11,9 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float, Int
 
-from ._methods import (BSF, GeodesicBalls, PullBack, SaturatedHeat, SpectralProjection,
+from ._methods import (AbstractMethod, BSF, GeodesicBalls, PullBack, SaturatedHeat, SpectralProjection,
                        as_method, method_name)
 from ._transfer import Pair, transfer
 from ._descriptors import wks
@@ -79,8 +80,12 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     return MapEstimate(C=C, p2p=p2p, C_initial=np.asarray(C0))
 
 
-def transfer_values(source: Spectrum, target: Spectrum, values, *, method="omp", C=None,
-                    p2p=None, k: int | None = None, centers=None, n_bsf: float | int = 0.05,
+def transfer_values(source: Spectrum, target: Spectrum,
+                    values: Float[ArrayLike, "m n_M"] | Float[ArrayLike, " n_M"], *,
+                    method: AbstractMethod | str = "omp",
+                    C: Float[ArrayLike, "k_N k"] | None = None,
+                    p2p: Int[ArrayLike, " n_N"] | None = None, k: int | None = None,
+                    centers: Int[ArrayLike, " n_c"] | None = None, n_bsf: float | int = 0.05,
                     seed: int = 0, mesh=None, **options) -> np.ndarray:
     """Transfer functions ``values`` ``(m, n_M)`` (or ``(n_M,)``) from source to target.
 
@@ -146,8 +151,8 @@ class LabelTransfer(NamedTuple):
     unassigned_share: float  #: area share of the target left unassigned
 
 
-def transfer_labels(source: Spectrum, target: Spectrum, labels, *, threshold: float = 0.5,
-                    **kwargs) -> LabelTransfer:
+def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, " n_M"], *,
+                    threshold: float = 0.5, **kwargs) -> LabelTransfer:
     """Transfer a segmentation: one step function per label, then arg-max on the target.
 
     ``labels`` ``(n_M,)`` non-negative ints.  Each label's indicator is transferred with

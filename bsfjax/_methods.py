@@ -39,11 +39,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float, Int
 
 from ._coders_shim import CODERS, AbstractCoder, LeastSquares, OMP, as_coder, encode
 from ._coding import decode
 from ._errors import BSFError
-from ._frame import build_frame, transfer_frame, unique_atoms
+from ._frame import (ADAPTIVE_N_SCALES, DENSE_BUDGET_BYTES, build_frame, transfer_frame,
+                     unique_atoms)
 from ._spectrum import Spectrum
 
 __all__ = ["AbstractMethod", "BSF", "SpectralProjection", "PullBack", "ProductBasis",
@@ -75,11 +77,11 @@ class Pair(eqx.Module):
 
     source: Spectrum
     target: Spectrum | None = None
-    C: jax.Array | None = None
-    C2: jax.Array | None = None
-    p2p: jax.Array | None = None
-    centers: jax.Array | None = None
-    distances: jax.Array | None = None
+    C: Float[ArrayLike, "*pairs k_N k"] | None = None
+    C2: Float[ArrayLike, "*pairs k2_N k2"] | None = None
+    p2p: Int[ArrayLike, "*pairs n_N"] | None = None
+    centers: Int[ArrayLike, "*pairs n_c"] | None = None
+    distances: Float[ArrayLike, "*pairs n_c n_M"] | None = None
 
 
 def _shape(x):
@@ -116,6 +118,12 @@ class AbstractMethod(eqx.Module):
     def source_k(self, k: int) -> int:
         """Source eigenpairs used for basis size ``k``."""
         return k
+
+    def frame_entries(self, pair: Pair) -> int:
+        """Entries ``n · q`` of the largest dense frame this method would build (0: none);
+        the engine runs a method whose frame exceeds the dense budget eagerly, on
+        per-vertex-list frames (:class:`~bsfjax.SparseFrame`)."""
+        return 0
 
     def check(self, pair: Pair, k: int, transfer: bool, batch: int) -> None:
         """Raise :class:`~bsfjax.BSFError` for missing or ill-shaped inputs (before tracing)."""
@@ -175,6 +183,9 @@ class _FrameSettings(AbstractMethod):
         return build_frame(pair.source.truncate(k), pair.centers, self.taus, self.gamma,
                            tau_convention=self.tau_convention)
 
+    def n_scales(self) -> int:
+        return ADAPTIVE_N_SCALES if isinstance(self.taus, str) else len(self.taus)
+
 
 def _normalize_taus(taus):
     return taus if isinstance(taus, str) else tuple(float(t) for t in np.atleast_1d(taus))
@@ -209,8 +220,19 @@ class BSF(_FrameSettings):
             raise BSFError(f"frame_transfer must be one of {FRAME_TRANSFERS}, got "
                            f"{self.frame_transfer!r}")
 
+    def frame_entries(self, pair):
+        q = self.n_scales() * int(np.shape(pair.centers)[-1])
+        n = max(np.shape(pair.source.evecs)[-2],
+                0 if pair.target is None else np.shape(pair.target.evecs)[-2])
+        return n * q
+
     def check(self, pair, k, transfer, batch):
         _check_centers("bsf", pair, batch)
+        if self.prune and pair.centers is not None and not isinstance(pair.centers, jax.core.Tracer):
+            itemsize = jax.dtypes.canonicalize_dtype(jnp.float64).itemsize
+            if self.frame_entries(pair) * itemsize > DENSE_BUDGET_BYTES:
+                raise BSFError("prune=True needs a dense frame; this pair's frame is beyond the "
+                               "dense budget (use prune=False on large meshes)")
         if transfer and self.frame_transfer == "p2p":
             _check_p2p(pair, batch, "frame_transfer='p2p'")
 

@@ -11,16 +11,17 @@ transfer``, ``bsfjax demo``, the experiments and :func:`transfer_pairs` — call
 from __future__ import annotations
 
 from collections.abc import Sequence
-from functools import partial
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 from ._devices import pad_leading, shard_leading
 from ._errors import BSFError
+from ._frame import DENSE_BUDGET_BYTES
 from ._validate import check_finite
 from ._methods import AbstractMethod, Pair, as_method, method_name
 from ._spectrum import Spectrum
@@ -31,13 +32,12 @@ __all__ = ["TransferResult", "transfer", "transfer_pairs", "stack_pairs"]
 class TransferResult(NamedTuple):
     """Output of :func:`transfer` (leading pair axis when the pair was stacked)."""
 
-    approximation: jax.Array | None  #: ``(m, n_M)`` ``f̃`` on the source, or ``None``
-    transferred: jax.Array | tuple | None  #: ``(m, n_N)`` on the target (a tuple per k_N)
-    codes: jax.Array | None  #: ``(m, q)`` the BSF codes ``α`` (``None`` for other methods)
+    approximation: Float[Array, "*pairs m n_M"] | None  #: ``f̃`` on the source, or ``None``
+    transferred: Float[Array, "*pairs m n_N"] | tuple | None  #: on the target (tuple per k_N)
+    codes: Float[Array, "*pairs m q"] | None  #: the BSF codes ``α`` (``None`` without a frame)
 
 
-@partial(eqx.filter_jit)
-def _run(method: AbstractMethod, pair: Pair, F, k: int, k_targets, batched: bool):
+def _kernel(method: AbstractMethod, pair: Pair, F, k: int, k_targets, batched: bool):
     """``k_targets``: ``None`` (no transfer), ``()`` (transfer with all of ``pair.C``) or a
     tuple of row counts ``k_N`` (one transfer per ``C[:k_N]``)."""
 
@@ -54,6 +54,9 @@ def _run(method: AbstractMethod, pair: Pair, F, k: int, k_targets, batched: bool
     if not batched:
         return one(pair, F)
     return jax.vmap(one)(pair, F)
+
+
+_run = eqx.filter_jit(_kernel)
 
 
 def _check_k_targets(k_targets, method, pair, transfer: bool):
@@ -101,8 +104,9 @@ def _check_pair(method: AbstractMethod, pair: Pair, k: int, transfer: bool, b: i
         check_finite(C, "pair.C")
 
 
-def transfer(method, pair: Pair, f, *, k: int | None = None, transfer: bool = True,
-             k_targets=None, **options) -> TransferResult:
+def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pairs m n_M"], *,
+             k: int | None = None, transfer: bool = True, k_targets=None,
+             **options) -> TransferResult:
     r"""Approximate ``f`` on the source and carry it to the target with one method.
 
     The one transfer function of bsfjax: the manual route
@@ -157,6 +161,11 @@ def transfer(method, pair: Pair, f, *, k: int | None = None, transfer: bool = Tr
                         if np.issubdtype(np.asarray(x).dtype, np.floating) else jnp.asarray(x),
                         pair)
     kt = None if not transfer else (() if k_targets is None else k_targets)
+    itemsize = jax.dtypes.canonicalize_dtype(jnp.float64).itemsize
+    if not batched and method.frame_entries(pair) * itemsize > DENSE_BUDGET_BYTES:
+        # a dense frame would not fit: run eagerly, so that build_frame / transfer_frame make
+        # per-vertex-list frames (SparseFrame) and encode / decode use them
+        return TransferResult(*_kernel(method, pair, F, k, kt, batched))
     if batched and jax.device_count() > 1:
         # pairs are independent: GSPMD splits the vmapped kernel without communication, each
         # device computing whole pairs (identical results); padding repeats the last pair
@@ -182,7 +191,8 @@ def stack_pairs(pairs: Sequence[Pair]) -> Pair:
     return jax.tree.map(lambda *x: np.stack([np.asarray(v) for v in x]), *pairs)
 
 
-def transfer_pairs(method, pairs: Sequence[Pair] | Pair, f, **kwargs) -> TransferResult:
+def transfer_pairs(method: AbstractMethod | str, pairs: Sequence[Pair] | Pair,
+                   f: Float[ArrayLike, "P m n_M"], **kwargs) -> TransferResult:
     """:func:`transfer` over ``P`` pairs of equal shapes in one jitted ``vmap``.
 
     ``pairs``: a sequence of :class:`~bsfjax.Pair` (stacked here) or an already stacked one;

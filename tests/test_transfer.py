@@ -176,3 +176,31 @@ def test_four_cpu_devices_give_identical_results(pairs, tmp_path):
                 np.testing.assert_array_equal(z[key], value, err_msg=key)
             else:  # residuals / approximations: XLA may round a batched product differently
                 np.testing.assert_allclose(z[key], value, rtol=1e-6, atol=1e-6, err_msg=key)
+
+
+def test_frames_beyond_the_dense_budget_run_eagerly_on_list_frames(pairs, monkeypatch):
+    """Above the dense budget the engine builds SparseFrames (eagerly): same numbers."""
+    import bsfjax._frame as frame_mod
+    import bsfjax._transfer as transfer_mod
+
+    src, tgt, n = pairs
+    C, centers, F = _inputs(src, tgt, n)
+    p = bsfjax.Pair(src[0], tgt[0], C[0], centers=centers[0])
+    dense = bsfjax.transfer("omp", p, F[0], sparsity=6)
+    kinds = []
+    orig = frame_mod.transfer_frame
+
+    def spy(frame, *a, **kw):
+        kinds.append(type(frame).__name__)
+        return orig(frame, *a, **kw)
+
+    monkeypatch.setattr(frame_mod, "DENSE_BUDGET_BYTES", 1024)
+    monkeypatch.setattr(transfer_mod, "DENSE_BUDGET_BYTES", 1024)
+    monkeypatch.setattr("bsfjax._methods.transfer_frame", spy)
+    listed = bsfjax.transfer("omp", p, F[0], sparsity=6)
+    assert kinds == ["SparseFrame"]
+    np.testing.assert_array_equal(np.asarray(listed.codes) != 0, np.asarray(dense.codes) != 0)
+    np.testing.assert_allclose(np.asarray(listed.transferred), np.asarray(dense.transferred),
+                               rtol=1e-5, atol=1e-5)
+    with pytest.raises(ValueError, match="prune=True needs a dense frame"):
+        bsfjax.transfer("omp", p, F[0], prune=True)

@@ -60,7 +60,7 @@ calling the engine only through ``_engine``; then in ``_registry.py`` import it 
 from __future__ import annotations
 
 from ._datasets import Dataset, load_dataset
-from ._engine import APPROX_METHODS, KN_METHODS, PARAMETER_SETS, TRANSFER_METHODS
+from ._engine import APPROX_METHODS, CODERS, KN_METHODS, PARAMETER_SETS, TRANSFER_METHODS
 from ._io import Report, pivot_markdown, summarize, write_csv
 from ._registry import EXPERIMENTS, Experiment, cli, reproduce
 from ._shapes import N_LANDMARKS, ShapeData, _functions, prepare_shapes
@@ -75,6 +75,7 @@ from .table5 import tosca_experiment
 
 __all__ = [
     "EXPERIMENTS", "Experiment", "Report", "DEFAULT_KS", "APPROX_METHODS", "TRANSFER_METHODS",
+    "CODERS",
     "PARAMETER_SETS", "ShapeData", "prepare_shapes", "approximation_experiment",
     "transfer_experiment", "kn_experiment", "frame_time_experiment", "transfer_time_experiment",
     "tosca_experiment", "parameter_experiment", "sparse_experiment", "SPARSITIES",

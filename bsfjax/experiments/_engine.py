@@ -1,21 +1,21 @@
 """The experiments' one adapter to the transfer engine.
 
-Every call of the experiments into the engine (the methods of the paper's Sec. 6 and the BSF
-coders: :func:`bsfjax._baselines.run_baseline`, its :class:`~bsfjax._baselines.Params` and
-:class:`~bsfjax._baselines.PairInput`) and into the array-level BSF functions
+Every call of the experiments into the engine (:func:`bsfjax.transfer` and its method objects,
+:data:`bsfjax.METHODS`, :class:`bsfjax.Pair`) and into the array-level BSF functions
 (:func:`~bsfjax.encode`, :func:`~bsfjax.decode`, :func:`~bsfjax.build_frame`,
 :func:`~bsfjax.transfer_frame`) goes through this module, and no other module of
-:mod:`bsfjax.experiments` imports the engine.  Switching the engine changes this file only.
+:mod:`bsfjax.experiments` imports the engine.
 
 What the experiments see:
 
 * method names: :data:`METHODS`, :data:`CODERS`, :data:`APPROX_METHODS`,
   :data:`TRANSFER_METHODS`, :data:`KN_METHODS`, :data:`PLAIN_METHODS`;
-* settings: :func:`settings` (``settings(**overrides)``, the paper's defaults otherwise;
-  overrides ``taus``, ``gamma``, ``sparsity``, ``eps_fraction``, ...) and
+* settings: :func:`settings` (``settings(**overrides)``: the paper's defaults, i.e. each
+  method's own defaults, with ``taus``, ``gamma``, ``sparsity``, ``eps_fraction``, … applied
+  to every method that has that option, on the method or on its coder) and
   :data:`PARAMETER_SETS` (Table 5's two sets);
 * one pair (or a stack of pairs): :func:`pair_input`, :func:`stack`;
-* running one method: :func:`run_method` → ``(approximation, transferred)``;
+* running one method: :func:`run_method` → ``(approximation, transferred, codes)``;
 * Table 3's timed frames: :func:`frame_atoms` (the BSF), :func:`heat_frame` (the
   saturated kernels of the ``heat`` baseline) and their size :func:`n_atoms`;
 * the array-level functions, re-exported: :func:`build_frame`, :func:`transfer_frame`,
@@ -24,22 +24,24 @@ What the experiments see:
 
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
-import numpy as np
+import dataclasses
 
-from .._baselines import CODERS, METHODS, BaselineResult, PairInput, Params, run_baseline
-from .._baselines import _saturate
-from .._coding import decode, encode
+import jax.numpy as jnp
+
+from .._encode import decode, encode
 from .._frame import build_frame, transfer_frame
+from .._methods import (BSF, CODER_NAMES, METHODS as _METHODS, PAPER_GAMMA, PAPER_TAUS,
+                        AbstractMethod, Pair, _saturate)
+from .._transfer import TransferResult, stack_pairs, transfer
+
+METHODS = tuple(_METHODS)
+CODERS = CODER_NAMES
 
 __all__ = ["METHODS", "CODERS", "APPROX_METHODS", "TRANSFER_METHODS", "KN_METHODS",
            "PLAIN_METHODS", "PARAMETER_SETS", "Settings", "settings", "pair_input", "stack",
            "run_method", "frame_atoms", "n_atoms", "heat_frame", "build_frame", "transfer_frame",
            "encode", "decode"]
 
-#: The settings object of the engine (frames and coders).
-Settings = Params
 #: Methods with an approximation on the source (all but the point-map pull-back).
 APPROX_METHODS = tuple(m for m in METHODS if m != "p2p")
 #: Methods that transfer (all).
@@ -50,15 +52,48 @@ KN_METHODS = ("std",) + CODERS
 PLAIN_METHODS = ("std", "std2", "p2p", "prod")
 
 
-def settings(**overrides) -> Settings:
-    """The engine's settings: the paper's (n_BSF aside: τ = (0.001, 0.005, 0.01) unit-area,
-    γ = 0.75, S = 10, ε = ‖f‖/10, area-weighted coding) with ``overrides`` applied.
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """Overrides of the methods' default options (an empty one: the paper's settings)."""
 
-    Arguments:
-        **overrides: settings to change, e.g. ``taus``, ``gamma``, ``sparsity``
-            (OMP's S), ``eps_fraction`` (``omp_error``'s ε / ‖f‖).
+    overrides: tuple = ()
+
+    @property
+    def taus(self):
+        return dict(self.overrides).get("taus", PAPER_TAUS)
+
+    @property
+    def gamma(self):
+        return dict(self.overrides).get("gamma", PAPER_GAMMA)
+
+    def method(self, name: str) -> AbstractMethod:
+        """The method object of ``name`` with every override it (or its coder) has."""
+        m = _METHODS[name]
+        own = {f.name for f in dataclasses.fields(m)}
+        coder = getattr(m, "coder", None)
+        cfields = {f.name for f in dataclasses.fields(coder)} if coder is not None else set()
+        opts = {k: v for k, v in self.overrides if k in own}
+        copts = {k: v for k, v in self.overrides if k in cfields and k not in own}
+        if copts:
+            opts["coder"] = dataclasses.replace(coder, **copts)
+        return m.with_options(**opts) if opts else m
+
+
+def settings(**overrides) -> Settings:
+    """The engine's settings: the paper's (τ = (0.001, 0.005, 0.01) unit-area, γ = 0.75,
+    S = 10, ε = ‖f‖/10, area-weighted coding) with ``overrides`` applied.
+
+    **Arguments:**
+
+    - ``**overrides``: options to change, e.g. ``taus``, ``gamma``, ``sparsity`` (OMP's S),
+      ``eps_fraction`` (``omp_error``'s ε / ‖f‖); each goes to every method that has it.
     """
-    return Params(**overrides)
+    if "taus" in overrides and not isinstance(overrides["taus"], str):
+        overrides["taus"] = tuple(float(t) for t in overrides["taus"])
+    s = Settings(tuple(sorted(overrides.items())))
+    for name in METHODS:  # every override is checked now, not when a method first runs
+        s.method(name)
+    return s
 
 
 #: Table 5's two BSF parameter sets.  "paper": the paper's defaults.  "wide": larger, fewer
@@ -70,7 +105,7 @@ PARAMETER_SETS = {
 
 
 def pair_input(source, target=None, C=None, C2=None, p2p=None, centers=None,
-               distances=None) -> PairInput:
+               distances=None) -> Pair:
     """One source/target pair as the engine takes it.
 
     Arguments:
@@ -79,17 +114,17 @@ def pair_input(source, target=None, C=None, C2=None, p2p=None, centers=None,
         p2p: point map (target vertex → source vertex) of the ``p2p`` method.
         centers: BSF centres on the source; distances: geodesic distances from them (``geod``).
     """
-    return PairInput(source=source, target=target, C=C, C2=C2, p2p=p2p, centers=centers,
-                     distances=distances)
+    return Pair(source=source, target=target, C=C, C2=C2, p2p=p2p, centers=centers,
+                distances=distances)
 
 
 def stack(items):
     """Stack equal-shaped pairs (leading pair axis) to run them under one ``vmap``."""
-    return jax.tree.map(lambda *x: np.stack([np.asarray(v) for v in x]), *items)
+    return stack_pairs(items)
 
 
 def run_method(method: str, pair, F, *, k: int, settings: Settings, transfer: bool = True,
-               k_targets=None) -> BaselineResult:
+               k_targets=None) -> TransferResult:
     """Approximate ``F`` on the source with ``method`` and transfer it to the target.
 
     Arguments:
@@ -102,10 +137,10 @@ def run_method(method: str, pair, F, *, k: int, settings: Settings, transfer: bo
         k_targets: target sizes: one transfer per ``C[:k_N]`` (``transferred`` a tuple).
 
     Returns:
-        ``(approximation, transferred)`` (``approximation`` is ``None`` for ``p2p``).
+        ``(approximation, transferred, codes)`` (``approximation`` is ``None`` for ``p2p``).
     """
-    return run_baseline(method, pair, F, k=k, params=settings, transfer=transfer,
-                        k_targets=k_targets)
+    return transfer(settings.method(method), pair, F, k=k, transfer=transfer,
+                    k_targets=k_targets)
 
 
 def frame_atoms(spectrum, centers, settings: Settings):
