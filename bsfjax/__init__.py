@@ -18,10 +18,16 @@ from ._mesh import Mesh, MeshReport, load_mesh, mesh_report, save_mesh
 from ._example import ExamplePair, example_mesh, example_pair
 from ._spectrum import Spectrum, interval_spectrum, spectrum, spectrum_from_operators
 from ._sampling import farthest_point_sampling
+from ._operator import AbstractFrame
 from ._sparse_frame import SparseFrame
-from ._frame import (Frame, adaptive_taus, build_frame, prune_frame, transfer_frame,
-                    unique_atoms)
-from ._coding import CodingInfo, decode, encode
+from ._dense_frame import Frame
+from ._frame import build_frame, transfer_frame
+from ._frame_tools import adaptive_taus, prune_frame, unique_atoms
+from ._coders import AbstractCoder, CodingInfo
+from ._lstsq import LeastSquares
+from ._omp import OMP, ErrorOMP
+from ._lasso import Lasso
+from ._encode import CODERS, as_coder, decode, encode
 from ._pipeline import PairResult, approximate, stack_spectra, transfer, transfer_pairs
 from ._descriptors import hks, wks
 from ._fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
@@ -49,6 +55,14 @@ __all__ = [
     "CodingInfo",
     "decode",
     "encode",
+    "AbstractCoder",
+    "LeastSquares",
+    "OMP",
+    "ErrorOMP",
+    "Lasso",
+    "CODERS",
+    "as_coder",
+    "AbstractFrame",
     "FmapWeights",
     "estimate_fmap",
     "fmap_energy",

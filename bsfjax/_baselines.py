@@ -45,7 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._coding import decode, encode
+from ._encode import decode, encode
 from ._errors import BSFError
 from ._frame import build_frame, transfer_frame, unique_atoms
 from ._spectrum import Spectrum

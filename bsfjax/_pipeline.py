@@ -16,7 +16,7 @@ import numpy as np
 
 from ._devices import pad_leading, shard_leading
 from ._validate import check_finite
-from ._coding import decode, encode
+from ._encode import decode, encode
 from ._errors import BSFError
 from ._frame import Frame, build_frame, transfer_frame
 from ._sparse_frame import SparseFrame

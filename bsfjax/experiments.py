@@ -54,7 +54,7 @@ from ._baselines import CODERS, METHODS, PairInput, Params, run_baseline
 from ._datasets import Dataset, load_dataset
 from ._descriptors import wks
 from ._errors import BSFError
-from ._coding import decode, encode
+from ._encode import decode, encode
 from ._estimation import estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p
 from ._frame import build_frame, transfer_frame
