@@ -26,7 +26,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
+from jaxtyping import ArrayLike, Float, Int
 
 from ._binarize import build_core_jit, kernel_coeffs_jit, transfer_coeffs_jit
 from ._dense_frame import Frame
@@ -62,9 +62,10 @@ def _check_sparse_concrete(*arrays) -> None:
                        "sparse=False there")
 
 
-def build_frame(spectrum: Spectrum, centers, taus=(1e-3, 5e-3, 1e-2), gamma=0.75,
-                tau_convention: str = "unit_area", *, prune: bool = False,
-                sparse: bool | None = None):
+def build_frame(spectrum: Spectrum, centers: Int[ArrayLike, " c"],
+                taus: Float[ArrayLike, " s"] | float | str = (1e-3, 5e-3, 1e-2),
+                gamma: Float[ArrayLike, " s"] | float = 0.75, tau_convention: str = "unit_area",
+                *, prune: bool = False, sparse: bool | None = None) -> AbstractFrame:
     """The Binary Sparse Frame of paper Algorithm 1, every centre and scale in one jitted call.
 
     For each scale ``τ_s`` and centre ``x_c`` (column ``j = s · n_centers + c``)::
@@ -79,7 +80,8 @@ def build_frame(spectrum: Spectrum, centers, taus=(1e-3, 5e-3, 1e-2), gamma=0.75
     ``s²``, so unit-area atoms do not depend on the shape's units; on FAUST (area ≈ 1.8 m²) they
     are close to the paper's raw setting.
 
-    Args:
+    **Arguments:**
+
         spectrum: eigenpairs of the shape (:func:`bsfjax.spectrum`, or
             :func:`bsfjax.interval_spectrum` in 1D); all ``k`` of them are used.
         centers: ``(n_centers,)`` int vertex indices (e.g. :func:`farthest_point_sampling`).
@@ -151,7 +153,9 @@ def build_frame(spectrum: Spectrum, centers, taus=(1e-3, 5e-3, 1e-2), gamma=0.75
     return prune_frame(frame) if prune else frame
 
 
-def transfer_frame(frame, C, target_spectrum: Spectrum, *, p2p=None, sparse: bool | None = None):
+def transfer_frame(frame: AbstractFrame, C: Float[ArrayLike, "kN kM"],
+                   target_spectrum: Spectrum, *, p2p: Int[ArrayLike, " nN"] | None = None,
+                   sparse: bool | None = None) -> AbstractFrame:
     """Carry a frame from shape ``M`` to shape ``N`` through a functional map (Eq. 11–12).
 
     With ``C`` ``(k_N, k_M)`` mapping coefficient vectors on ``M`` to ``N``::
@@ -173,7 +177,8 @@ def transfer_frame(frame, C, target_spectrum: Spectrum, *, p2p=None, sparse: boo
     ``B_N = B_M[p2p]``, instead of being re-binarized from ``Φ_N C a`` (the coefficients are
     still ``C a``): with an estimated map this avoids the blur of a truncated ``C``.
 
-    Args:
+    **Arguments:**
+
         frame: a frame on ``M`` with ``gammas`` (as :func:`build_frame` returns) and at least
             ``k_M`` coefficient rows (extra rows are ignored).
         C: ``(k_N, k_M)`` functional map, ``M → N`` on coefficients.

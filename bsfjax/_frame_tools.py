@@ -23,7 +23,7 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._binarize import build_core
 from ._dense_frame import Frame
@@ -162,9 +162,9 @@ def _check_gammas(gamma, n_scales: int) -> np.ndarray:
     return g
 
 
-def adaptive_taus(spectrum: Spectrum, centers, *, n_scales: int = ADAPTIVE_N_SCALES,
-                  area_range=ADAPTIVE_AREA_RANGE, gamma: float = 0.75,
-                  tau_convention: str = "unit_area") -> jax.Array:
+def adaptive_taus(spectrum: Spectrum, centers: Int[ArrayLike, " c"], *,
+                  n_scales: int = ADAPTIVE_N_SCALES, area_range=ADAPTIVE_AREA_RANGE,
+                  gamma: float = 0.75, tau_convention: str = "unit_area") -> Float[Array, " s"]:
     """Scales chosen from the spectrum: atoms whose mean area share spans ``area_range``.
 
     With ``s(τ)`` the mean area share ``Σ_v A_v B_v / Σ A`` of the atoms of scale τ (at up to
@@ -184,7 +184,8 @@ def adaptive_taus(spectrum: Spectrum, centers, *, n_scales: int = ADAPTIVE_N_SCA
     shares unchanged, so the ``"unit_area"`` τ are unchanged and the ``"raw"`` τ scale with
     the area, exactly as the atoms require.  Traceable (works under ``jit``/``vmap``).
 
-    Args:
+    **Arguments:**
+
         spectrum: eigenpairs of the shape (all ``k`` are used, as :func:`build_frame` does).
         centers: ``(n_centers,)`` vertex indices (the frame's centres).
         n_scales: number of scales, ``≥ 1`` (a single scale gets the share ``lo'``).
@@ -218,7 +219,8 @@ def adaptive_taus(spectrum: Spectrum, centers, *, n_scales: int = ADAPTIVE_N_SCA
                           jnp.asarray(rng[1], dt), int(n_scales), tau_convention == "unit_area")
 
 
-def unique_atoms(frame) -> tuple[jax.Array, jax.Array]:
+def unique_atoms(frame: AbstractFrame | Float[ArrayLike, "n q"]
+                 ) -> tuple[Bool[Array, " q"], Int[Array, " q"]]:
     """Which columns of a frame are distinct and non-empty (traceable).
 
     Two columns are duplicates when their supports ``{v : B_v ≠ 0}`` are equal (for binary
@@ -227,7 +229,8 @@ def unique_atoms(frame) -> tuple[jax.Array, jax.Array]:
     ``q × q`` Gram matrix.  (Distinct supports collide with probability about ``q² / 2⁶⁴``;
     :func:`prune_frame` verifies every match exactly.)
 
-    Args:
+    **Arguments:**
+
         frame: a :class:`~bsfjax.Frame`, a :class:`~bsfjax.SparseFrame` or an ``(n, q)``
             atom array.
 
@@ -247,7 +250,7 @@ def unique_atoms(frame) -> tuple[jax.Array, jax.Array]:
     return _unique_core(frame, jnp.asarray(_hash_rows(frame.n_vertices)))
 
 
-def prune_frame(frame: AbstractFrame, alpha=None):
+def prune_frame(frame: AbstractFrame, alpha: Float[ArrayLike, "*batch q"] | None = None):
     """Drop empty and duplicate atoms, keeping the first of each set of equal columns.
 
     ``Frame.columns`` of the result gives, for every remaining column, its index in the frame

@@ -79,7 +79,7 @@ def test_transfer_command_function_with_estimated_map(cli_files):
     out = d / "head_out.txt"
     rc = main(["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--function", str(d / "head.txt"),
                "--out", str(out), "-k", "20", "--landmarks", "{0}:{0}".format(
-                   ",".join(str(i) for i in __import__("bsfjax._demo").demo.example_landmarks(pair)))])
+                   ",".join(str(i) for i in __import__("bsfjax._demo")._demo.example_landmarks(pair)))])
     assert rc == 0
     got = np.loadtxt(out)
     err = bsfjax.relative_error(f, got, bsfjax.spectrum(pair.target, 5).mass)

@@ -109,7 +109,7 @@ SHARDED = textwrap.dedent("""
 def _function_batch(spec):
     """OMP codes of 7 functions (not a multiple of 4: padded) in a sparse and a dense frame, a
     least-squares approximation, and whether encode took the multi-device path."""
-    import bsfjax._coding as coding
+    import bsfjax._encode as coding
 
     centers = np.arange(0, spec.n_vertices, 9)
     F = (np.random.default_rng(5).random((7, spec.n_vertices)) < 0.3).astype(np.float32)

@@ -382,7 +382,7 @@ def test_mesh_report_counts(tmp_path):
 
 @pytest.mark.parametrize("target,call", [
     ("bsfjax._frame._build_core", lambda s: bsfjax.build_frame(s.spec, [99])),
-    ("bsfjax._coding._encode_batch", lambda s: bsfjax.encode(s.frame, s.F * np.nan)),
+    ("bsfjax._encode._encode_batch", lambda s: bsfjax.encode(s.frame, s.F * np.nan)),
     ("bsfjax._metrics._relative_error", lambda s: bsfjax.relative_error(s.F, s.F, -s.spec.mass)),
     ("bsfjax._fmap._fmap_to_p2p_jit", lambda s: bsfjax.fmap_to_p2p(np.eye(5) * np.inf, s.spec,
                                                                  s.spec)),
