@@ -88,8 +88,12 @@ def test_encode_accepts_build_frame(faust):
     mesh = bsfjax.load_mesh(data_path("faust", "tr_reg_000.off"))
     frame = bsfjax.build_frame(bsfjax.spectrum(mesh, 20), np.arange(0, mesh.n_vertices, 400))
     F = faust["F"][:3]
-    np.testing.assert_allclose(encode(frame, F, "omp", sparsity=5),
+    np.testing.assert_allclose(encode(frame, F, "omp", sparsity=5, weights=None),
                                encode(np.asarray(frame.atoms), F, "omp", sparsity=5), atol=1e-6)
+    # its default weights are its vertex areas
+    np.testing.assert_allclose(encode(frame, F, "omp", sparsity=5),
+                               encode(np.asarray(frame.atoms), F, "omp", sparsity=5,
+                                      weights=np.asarray(frame.mass)), atol=1e-6)
 
 
 
