@@ -147,7 +147,8 @@ def test_four_cpu_devices_give_identical_results(pairs, tmp_path):
     assert int(ref["encode_sharded"]) == 0  # one device here: the plain path
     with np.load(path) as z:
         assert int(z["devices"]) == 4 and int(z["encode_sharded"]) == 1
-        np.testing.assert_array_equal(z["alpha"], np.asarray(single.alpha))
+        # area-weighted codes (encode's default): XLA may round the batched products differently
+        np.testing.assert_allclose(z["alpha"], np.asarray(single.alpha), rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(z["transferred"], np.asarray(single.transferred), rtol=1e-6, atol=1e-6)
         for key, value in ref.items():
             if key == "encode_sharded":
