@@ -208,7 +208,7 @@ def main(argv=None):
             with jax.enable_x64(dt == "float64"):
                 Fj = jax.numpy.asarray(F, dt)
                 t, (A, info) = median_time(
-                    lambda: bsfjax.encode(frame, Fj, method, return_info=True,
+                    lambda: bsfjax.encode(frame, Fj, method, return_info=True, weights=None,
                                           **options[method]), args.repeats)
                 A = np.asarray(A, np.float64)
                 info = jax.tree.map(np.asarray, info)
@@ -252,7 +252,8 @@ def main(argv=None):
                   f"{p['time_s']:8.3f} {p['ratio']:7.2f}")
     default_eps = {}
     for eps_opt in (None, "spams"):  # encode's default bounds, ours only (see docstring)
-        _, inf = bsfjax.encode(frame, F, "omp_error", eps=eps_opt, return_info=True)
+        _, inf = bsfjax.encode(frame, F, "omp_error", eps=eps_opt, return_info=True,
+                               weights=None)
         default_eps["(||f||/10)^2" if eps_opt is None else "spams ||f||/10"] = {
             "converged": int(np.sum(inf.converged)),
             "n_atoms_median": float(np.median(inf.n_atoms)),

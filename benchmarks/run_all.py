@@ -273,7 +273,8 @@ def run_size(suite: Suite, size: str):
             continue
         rep_m = rep if (size == "7k" or method in ("omp",)) else 0  # heavy: one call
         t_ours, (A_ours, info), t_first = timed(
-            lambda: bsfjax.encode(frame, F32, method, return_info=True, **opts), rep_m)
+            lambda: bsfjax.encode(frame, F32, method, return_info=True, weights=None,
+                                  **opts), rep_m)
         if method == "omp":
             alpha_omp = A_ours
         res = float(np.median(np.asarray(info.residual) / np.linalg.norm(F, axis=1)))
@@ -320,7 +321,7 @@ def run_size(suite: Suite, size: str):
     def ours_pipeline():
         c = bsfjax.farthest_point_sampling(src_mesh, FRACTION)
         fr = bsfjax.build_frame(sm, c, TAUS, GAMMA)
-        a = bsfjax.encode(fr, F32, "omp", sparsity=SPARSITY)
+        a = bsfjax.encode(fr, F32, "omp", sparsity=SPARSITY, weights=None)
         return bsfjax.decode(bsfjax.transfer_frame(fr, C_id, sn), a)
 
     t_ours, moved, _ = timed(ours_pipeline, rep)

@@ -37,13 +37,18 @@ from ._sampling import farthest_point_sampling
 from ._geodesics import geodesic_distances, geodesic_error
 
 # frame
+from ._operator import AbstractFrame
+from ._dense_frame import Frame
 from ._sparse_frame import SparseFrame
-from ._frame import (Frame, adaptive_taus, build_frame, prune_frame, transfer_frame,
-                     unique_atoms)
+from ._frame import build_frame, transfer_frame
+from ._frame_tools import adaptive_taus, prune_frame, unique_atoms
 
 # coding
-from ._coding import CodingInfo, decode, encode
-from ._coders_shim import ErrorOMP, Lasso, LeastSquares, OMP
+from ._coders import AbstractCoder, CodingInfo
+from ._lstsq import LeastSquares
+from ._omp import OMP, ErrorOMP
+from ._lasso import Lasso
+from ._encode import CODERS, as_coder, decode, encode
 
 # transfer
 from ._methods import (BSF, METHODS, AbstractMethod, GeodesicBalls, Pair, ProductBasis,
@@ -79,10 +84,12 @@ __all__ = [
     # sampling
     "farthest_point_sampling", "geodesic_distances", "geodesic_error",
     # frame
-    "Frame", "SparseFrame", "build_frame", "transfer_frame", "adaptive_taus", "prune_frame",
+    "AbstractFrame", "Frame", "SparseFrame", "build_frame", "transfer_frame", "adaptive_taus",
+    "prune_frame",
     "unique_atoms",
     # coding
-    "CodingInfo", "encode", "decode", "OMP", "ErrorOMP", "LeastSquares", "Lasso",
+    "AbstractCoder", "CodingInfo", "CODERS", "as_coder", "encode", "decode", "OMP", "ErrorOMP",
+    "LeastSquares", "Lasso",
     # transfer
     "METHODS", "AbstractMethod", "BSF", "SpectralProjection", "PullBack", "ProductBasis",
     "GeodesicBalls", "SaturatedHeat", "as_method", "Pair", "TransferResult", "transfer",

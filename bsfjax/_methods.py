@@ -41,11 +41,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float, Int
 
-from ._coders_shim import CODERS, AbstractCoder, LeastSquares, OMP, as_coder, encode
-from ._coding import decode
+from ._coders import AbstractCoder
+from ._encode import CODERS, as_coder, decode, encode
 from ._errors import BSFError
-from ._frame import (ADAPTIVE_N_SCALES, DENSE_BUDGET_BYTES, build_frame, transfer_frame,
-                     unique_atoms)
+from ._frame import build_frame, transfer_frame
+from ._frame_tools import ADAPTIVE_N_SCALES, prune_frame, unique_atoms
+from ._sparse_frame import SparseFrame
+from ._lstsq import LeastSquares
+from ._omp import OMP
 from ._spectrum import Spectrum
 
 __all__ = ["AbstractMethod", "BSF", "SpectralProjection", "PullBack", "ProductBasis",
@@ -228,21 +231,23 @@ class BSF(_FrameSettings):
 
     def check(self, pair, k, transfer, batch):
         _check_centers("bsf", pair, batch)
-        if self.prune and pair.centers is not None and not isinstance(pair.centers, jax.core.Tracer):
-            itemsize = jax.dtypes.canonicalize_dtype(jnp.float64).itemsize
-            if self.frame_entries(pair) * itemsize > DENSE_BUDGET_BYTES:
-                raise BSFError("prune=True needs a dense frame; this pair's frame is beyond the "
-                               "dense budget (use prune=False on large meshes)")
-        if transfer and self.frame_transfer == "p2p":
-            _check_p2p(pair, batch, "frame_transfer='p2p'")
 
     def prepare(self, pair, F, k):
         frame = self.frame(pair, k)
-        if self.prune:  # masked duplicates / empties get α = 0
-            frame = eqx.tree_at(lambda fr: fr.atoms, frame,
-                                frame.atoms * unique_atoms(frame.atoms)[0].astype(frame.atoms.dtype))
-        alpha = encode(frame, F, self.coder)
         p2p = pair.p2p if self.frame_transfer == "p2p" else None
+        if self.prune and isinstance(frame, SparseFrame):
+            # eager (beyond the dense budget): drop the columns, code in the rest, and give
+            # the codes back in the built frame's columns
+            pruned = prune_frame(frame)
+            a = encode(pruned, F, self.coder)
+            alpha = jnp.zeros(F.shape[:-1] + (frame.n_atoms,), a.dtype).at[
+                ..., np.asarray(pruned.columns)].set(a)
+            return (decode(pruned, a),
+                    lambda C: decode(transfer_frame(pruned, C, pair.target, p2p=p2p), a), alpha)
+        if self.prune:  # under jit: masked duplicates / empties get α = 0
+            keep = unique_atoms(frame)[0].astype(frame.atoms.dtype)
+            frame = eqx.tree_at(lambda fr: fr.atoms, frame, frame.atoms * keep)
+        alpha = encode(frame, F, self.coder)
         return (decode(frame, alpha),
                 lambda C: decode(transfer_frame(frame, C, pair.target, p2p=p2p), alpha), alpha)
 
@@ -324,8 +329,7 @@ class ProductBasis(AbstractMethod):
     def prepare(self, pair, F, k):
         phi = _evecs(pair.source, k)
         P = product_basis(phi)  # (n, K)
-        basis = _PlainFrame(P, pair.source.mass)
-        c = encode(basis, F, LeastSquares(rcond=self.rcond))
+        c = encode(P, F, LeastSquares(rcond=self.rcond, weights=pair.source.mass))
         iu, ju = np.triu_indices(k)
         half = 0.5 * c
         S = jnp.zeros((F.shape[0], k, k), F.dtype).at[:, iu, ju].add(half).at[:, ju, iu].add(half)
@@ -338,11 +342,11 @@ class ProductBasis(AbstractMethod):
         return c @ P.T, carry, None
 
 
-class _PlainFrame(eqx.Module):
-    """A non-binary dictionary with vertex areas (coded like a frame)."""
-
-    atoms: jax.Array
-    mass: jax.Array
+def _with_mass(coder: AbstractCoder, mass) -> AbstractCoder:
+    """``coder`` for a plain dictionary (no frame, so no areas): ``"area"`` → the source's."""
+    if isinstance(coder.weights, str) and coder.weights == "area":
+        return dataclasses.replace(coder, weights=mass)
+    return coder
 
 
 def geodesic_ball_radii(atoms: jax.Array, mass: jax.Array, n_scales: int) -> jax.Array:
@@ -380,8 +384,7 @@ class GeodesicBalls(_FrameSettings):
         radii = geodesic_ball_radii(frame.atoms, pair.source.mass, n_s)
         D = jnp.asarray(pair.distances, F.dtype)  # (n_c, n)
         atoms = (D[None, :, :] <= radii[:, None, None]).reshape(-1, D.shape[1]).T.astype(F.dtype)
-        balls = _PlainFrame(atoms, pair.source.mass)
-        alpha = encode(balls, F, self.coder)
+        alpha = encode(atoms, F, _with_mass(self.coder, pair.source.mass))
         coeffs = _evecs(pair.source, k).T @ (atoms * pair.source.mass[:, None])  # Φᵀ A χ
 
         def carry(C):
@@ -411,7 +414,7 @@ class SaturatedHeat(_FrameSettings):
     def prepare(self, pair, F, k):
         frame = self.frame(pair, k)
         atoms = _saturate(_evecs(pair.source, k) @ frame.coeffs, self.gamma)
-        alpha = encode(_PlainFrame(atoms, pair.source.mass), F, self.coder)
+        alpha = encode(atoms, F, _with_mass(self.coder, pair.source.mass))
 
         def carry(C):
             g = _evecs(pair.target, C.shape[0]) @ (C @ frame.coeffs)

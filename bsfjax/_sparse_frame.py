@@ -38,8 +38,14 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 
-from ._memory import release_free_memory
+from jaxtyping import Array, Float, Int
+
+from . import _operator
+from ._binarize import mask_block
 from ._errors import BSFError
+from ._gram_rows import host_callback_dtype, join64, split64
+from ._memory import release_free_memory
+from ._operator import AbstractFrame
 
 __all__ = ["SparseFrame", "sparse_atoms", "ell_matmul", "ell_rmatmul", "sparse_gram",
            "AtomVertices", "atom_vertices", "atom_sums", "ell_gram_rows"]
@@ -50,7 +56,7 @@ _BUILD_ELEMS = 2**24
 _PRODUCT_ELEMS = 2**22
 
 
-class SparseFrame(eqx.Module):
+class SparseFrame(AbstractFrame):
     """A Binary Sparse Frame whose atoms are stored as per-vertex atom lists (see module doc).
 
     Same fields and column order as :class:`bsfjax.Frame` except ``atoms``:
@@ -59,16 +65,17 @@ class SparseFrame(eqx.Module):
         atom_lists: ``(n, D)`` int32, the atoms containing each vertex in increasing order,
             padded with ``q``.
         coeffs: ``(k, q)`` spectral coefficients of each atom's kernel.
-        taus, centers, mass, gammas, tau_convention: as in :class:`bsfjax.Frame`.
+        taus, centers, mass, gammas, tau_convention, columns: as in :class:`bsfjax.Frame`.
     """
 
-    atom_lists: jax.Array
-    coeffs: jax.Array
-    taus: jax.Array
-    centers: jax.Array
-    mass: jax.Array
-    gammas: jax.Array | None = None
+    atom_lists: Int[Array, "n D"]
+    coeffs: Float[Array, "k q"]
+    taus: Float[Array, " q"]
+    centers: Int[Array, " q"]
+    mass: Float[Array, " n"] | None
+    gammas: Float[Array, " q"] | None = None
     tau_convention: str = eqx.field(static=True, default="unit_area")
+    columns: Int[Array, " q"] | None = None
 
     @property
     def n_vertices(self) -> int:
@@ -79,14 +86,54 @@ class SparseFrame(eqx.Module):
         return int(self.coeffs.shape[-1])
 
     @property
+    def dtype(self):
+        return self.coeffs.dtype
+
+    @property
     def nnz(self) -> int:
         """Number of ones of ``B``."""
         return int(np.asarray(_block_counts(self.atom_lists, self.n_atoms)).sum(dtype=np.int64))
 
-    @property
-    def effective_taus(self) -> jax.Array:
-        """As :attr:`bsfjax.Frame.effective_taus`."""
-        return effective_taus(self.taus, self.mass, self.tau_convention)
+    # ---------------------------------------------------------------- products
+
+    def apply(self, alpha):
+        return ell_matmul(self.atom_lists, alpha.T).T
+
+    def apply_transpose(self, y, w=None):
+        return ell_rmatmul(self.atom_lists, (y if w is None else y * w).T, self.n_atoms).T
+
+    def column_norms2(self, w=None):
+        n = self.n_vertices
+        ones = jnp.ones((n, 1), self.dtype if w is None else w.dtype)
+        return ell_rmatmul(self.atom_lists, ones if w is None else w[:, None],
+                           self.n_atoms)[:, 0]
+
+    def gram(self, w=None):
+        """``BᵀWB`` dense, from the host CSR product (:func:`sparse_gram`) through a callback;
+        only for ``q² · 8`` bytes within :data:`~bsfjax._operator.DENSE_BUDGET_BYTES`."""
+        q = self.n_atoms
+        if q * q * 8 > _operator.DENSE_BUDGET_BYTES:
+            raise BSFError(f"this coder needs the dense q × q Gram matrix (q = {q}: "
+                           f"{q * q * 8 / 2**30:.1f} GiB > DENSE_BUDGET_BYTES); use OMP or "
+                           "ErrorOMP ('omp', 'omp_error') for frames this large")
+        dtype = self.dtype if w is None else jnp.result_type(self.dtype, w)
+
+        def host(lists, w):
+            Bs = _lists_to_scipy(np.asarray(lists), q, None if w is None else np.asarray(w))
+            return split64((Bs.T @ Bs).toarray(), dtype)
+
+        out = jax.pure_callback(host, host_callback_dtype((q, q), dtype), self.atom_lists, w)
+        return join64(out, dtype)
+
+    def gram_rows(self, ks, w=None):
+        onehot = jax.nn.one_hot(ks, self.n_atoms, dtype=self.dtype if w is None else w.dtype)
+        return self.apply_transpose(self.apply(onehot), w)
+
+    def host_gram_source(self, w, n_rows: int):
+        """Always: rows from the lists and their 16-bit transpose (:class:`EllGramSource`)."""
+        return EllGramSource(self, None if w is None else np.asarray(w, np.float64))
+
+    # ---------------------------------------------------------------- structure
 
     def todense(self, dtype=None) -> jax.Array:
         """The ``(n, q)`` 0/1 matrix ``B`` (only for frames that fit in memory)."""
@@ -101,53 +148,71 @@ class SparseFrame(eqx.Module):
         return np.stack([(lists == int(j)).any(axis=1) for j in np.atleast_1d(js)],
                         axis=1).astype(np.float32)
 
+    def supports_equal(self, a, b):
+        """From the transpose of the lists (:func:`atom_vertices`): ``O(nnz)`` once."""
+        av = atom_vertices(self.atom_lists, self.n_atoms)
+        return np.array([np.array_equal(av.vertices(int(i)), av.vertices(int(j)))
+                         for i, j in zip(np.asarray(a), np.asarray(b))], bool)
+
+    def support_hashes(self, r):
+        return ell_rmatmul(self.atom_lists, jnp.asarray(r, jnp.uint32).T, self.n_atoms).T
+
+    def nonempty(self):
+        n = self.n_vertices
+        return ell_rmatmul(self.atom_lists, jnp.ones((n, 1), jnp.int32), self.n_atoms)[:, 0] > 0
+
+    def select_columns(self, cols, columns=None):
+        """Columns ``cols`` (increasing): the lists renumbered, dropped atoms moved to the
+        padding and each row re-sorted (the kept atoms keep their order), width cut to the
+        new largest count."""
+        cols = np.asarray(cols)
+        q = self.n_atoms
+        new = np.full(q + 1, cols.size, np.int32)
+        new[cols] = np.arange(cols.size, dtype=np.int32)
+        lists = np.sort(new[np.asarray(self.atom_lists)], axis=1)
+        width = max(1, int((lists < cols.size).sum(axis=1).max(initial=0)))
+        return SparseFrame(atom_lists=jnp.asarray(np.ascontiguousarray(lists[:, :width])),
+                           coeffs=self.coeffs[:, cols], taus=self.taus[cols],
+                           centers=self.centers[cols], mass=self.mass,
+                           gammas=None if self.gammas is None else self.gammas[cols],
+                           tau_convention=self.tau_convention, columns=columns)
+
+    def pull_back(self, p2p, coeffs, mass):
+        return SparseFrame(atom_lists=jnp.asarray(self.atom_lists)[p2p], coeffs=coeffs,
+                           taus=self.taus, centers=self.centers, mass=mass, gammas=self.gammas,
+                           tau_convention=self.tau_convention, columns=self.columns)
+
+    def rebinarized(self, evecs, coeffs, mass):
+        dtype = coeffs.dtype
+        ev = jnp.asarray(evecs[:, :coeffs.shape[0]], dtype)  # one (n, k_N) copy, not two
+        return SparseFrame(atom_lists=sparse_atoms(ev, coeffs, self.gammas), coeffs=coeffs,
+                           taus=self.taus, centers=self.centers, mass=mass, gammas=self.gammas,
+                           tau_convention=self.tau_convention, columns=self.columns)
+
     def to_scipy(self, weights=None) -> sp.csr_matrix:
         """``B`` (or ``diag(√w) B`` with ``weights``) as a float64 scipy CSR matrix (host)."""
-        lists = np.asarray(self.atom_lists)
-        n, q = lists.shape[0], self.n_atoms
-        valid = lists < q
-        counts = valid.sum(axis=1)
-        indptr = np.zeros(n + 1, np.int64)
-        np.cumsum(counts, out=indptr[1:])
-        data = np.ones(int(indptr[-1]))
-        if weights is not None:
-            data = np.repeat(np.sqrt(np.asarray(weights, np.float64)), counts)
-        return sp.csr_matrix((data, lists[valid], indptr), shape=(n, q))
+        return _lists_to_scipy(np.asarray(self.atom_lists), self.n_atoms,
+                               None if weights is None else np.asarray(weights, np.float64))
 
 
-def effective_taus(taus, mass, tau_convention: str):
-    """The τ multiplying the raw eigenvalues of a frame's columns: ``taus · Σ mass`` for
-    ``"unit_area"``, ``taus`` for ``"raw"`` (shared by :class:`bsfjax.Frame` and
-    :class:`SparseFrame`)."""
-    if tau_convention == "raw":
-        return taus
-    return taus * jnp.sum(mass, axis=-1, keepdims=True)
+def _lists_to_scipy(lists: np.ndarray, q: int, weights) -> sp.csr_matrix:
+    n = lists.shape[0]
+    valid = lists < q
+    counts = valid.sum(axis=1)
+    indptr = np.zeros(n + 1, np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    data = np.ones(int(indptr[-1]))
+    if weights is not None:
+        data = np.repeat(np.sqrt(np.asarray(weights, np.float64)), counts)
+    return sp.csr_matrix((data, lists[valid], indptr), shape=(n, q))
 
 
 # --------------------------------------------------------------------------- build
 
 
-def kernel_mask(evecs, coeffs, gammas):
-    """``(n, c)`` bool atoms of the columns of ``g = evecs @ coeffs``: ``|g| ≥ γ · max_v |g|``
-    per column (γ ``(c,)``) — the binarization rule of both frame kinds (``frame._binarize``
-    writes it in column blocks, :func:`sparse_atoms` turns its blocks into lists).
-
-    ``max |g|`` is taken as ``max(max g, −min g)`` and the test is division-free (equal to
-    ``|g|/max|g| ≥ γ`` up to one rounding at the threshold); a column with ``max |g| = 0`` (a
-    kernel that vanished, e.g. mapped to zero by C) gives an empty atom rather than 0/0 = NaN.
-    """
-    # "highest": full float32 products on GPU/TPU too (TF32/bf16 would move atoms at γ)
-    g = jnp.matmul(evecs, coeffs, precision=jax.lax.Precision.HIGHEST)
-    m = jnp.maximum(jnp.max(g, axis=0), -jnp.min(g, axis=0))
-    return (jnp.abs(g) >= gammas * m) & (m > 0)
-
-
-_mask_block = jax.jit(kernel_mask)  # one block of whole columns of the sparse build
-
-
 def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
     """``(n, D)`` atom lists of ``B = [|g| ≥ γ · max_v |g|]`` for ``g = evecs @ coeffs`` (the
-    dense rule of :func:`bsfjax._frame._binarize`), never forming the ``(n, q)`` matrix.
+    rule of :func:`bsfjax._binarize.kernel_mask`), never forming the ``(n, q)`` matrix.
 
     One pass over blocks of whole columns (atoms), ``n × cb ≈ 2²⁴`` kernel values each: the
     device computes a block's mask (and its column maxima) while the host turns the previous
@@ -176,7 +241,7 @@ def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
 
     pending = None
     for b in range(n_blocks):
-        mask = _mask_block(evecs, cblocks[b].T, gblocks[b])  # dispatched asynchronously
+        mask = mask_block(evecs, cblocks[b].T, gblocks[b])  # dispatched asynchronously
         if pending is not None:
             collect(*pending)
         pending = (b, mask)
@@ -460,3 +525,37 @@ def sparse_gram(frame: SparseFrame, weights=None) -> sp.csr_matrix:
         raise BSFError(f"frame must be a bsfjax.SparseFrame, got {type(frame).__name__}")
     B = frame.to_scipy(weights)
     return (B.T.tocsr() @ B).tocsr()
+
+
+class EllGramSource:
+    """Gram rows ``b_kᵀ W B`` of a :class:`SparseFrame` from its own atom lists (host view) and
+    their 16-bit transpose (:func:`atom_vertices`): about ``nnz · 2`` bytes besides the lists,
+    where a float64 scipy CSR and its transpose took ``nnz · 24``.
+
+    Without weights the rows are the exact overlap counts; with weights each term is
+    ``√w_v · √w_v`` summed in increasing ``v``, the products and order of scipy's
+    ``diag(√w) B`` CSR product.
+    """
+
+    def __init__(self, frame: SparseFrame, w64):
+        self.lists = np.asarray(frame.atom_lists)  # on CPU a view of the device buffer
+        self.av = atom_vertices(self.lists, frame.n_atoms)
+        if w64 is None:
+            self.vals = None
+        else:
+            sw = np.sqrt(w64)
+            self.vals = sw * sw
+
+    def norms2(self) -> np.ndarray:
+        """``(q,)`` float64 ``‖b_j‖²_W``."""
+        if self.vals is None:
+            return np.diff(self.av.indptr).astype(np.float64)
+        return atom_sums(self.av, self.vals)
+
+    def rows(self, ks) -> np.ndarray:
+        return ell_gram_rows(self.lists, self.av, ks, self.vals)
+
+    def release(self) -> None:
+        """Return the transpose's memory (see :mod:`bsfjax._memory`)."""
+        self.av = self.lists = None
+        release_free_memory()

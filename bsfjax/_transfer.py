@@ -21,7 +21,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._devices import pad_leading, shard_leading
 from ._errors import BSFError
-from ._frame import DENSE_BUDGET_BYTES
+from ._operator import DENSE_BUDGET_BYTES
 from ._validate import check_finite
 from ._methods import AbstractMethod, Pair, as_method, method_name
 from ._spectrum import Spectrum

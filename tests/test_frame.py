@@ -112,29 +112,6 @@ def test_build_matches_numpy(small, x64, gamma):
     assert np.asarray(fr.atoms)[np.asarray(fr.centers), np.arange(q)].all()
 
 
-@pytest.mark.parametrize("x64", [False, True])
-@pytest.mark.parametrize("width", [1, 7, 89])
-def test_binarize_in_column_blocks_matches_numpy(small, monkeypatch, x64, width):
-    """Column blocks of 1, 7 (the last one shifted to end at q = 90) and 89 atoms give the
-    float64 reference's atoms, under jit and vmap."""
-    import bsfjax._frame as frame_mod
-
-    specs, centers = small
-    spec = specs[1.0]
-    ref_norm, ref_coeffs, ref_g = build_reference(spec, centers, TAUS, (0.75,) * 3)
-    monkeypatch.setattr(frame_mod, "_BINARIZE_BLOCK_ELEMS", width * spec.n_vertices)
-    with jax.enable_x64(x64):
-        dtype = jnp.zeros(()).dtype
-        E, A = jnp.asarray(spec.evecs, dtype), jnp.asarray(ref_coeffs, dtype)
-        g = jnp.asarray(ref_g, dtype)
-        atoms = jax.jit(lambda E, A, g: frame_mod._binarize(E, A, g))(E, A, g)
-        batched = jax.vmap(frame_mod._binarize, in_axes=(None, 0, None))(E, jnp.stack([A, -A]), g)
-    assert atoms.shape == ref_norm.shape and atoms.dtype == dtype
-    assert_atoms_match(atoms, ref_norm, ref_g, 1e-9 if x64 else 1e-4)
-    np.testing.assert_array_equal(np.asarray(batched[0]), np.asarray(atoms))
-    np.testing.assert_array_equal(np.asarray(batched[1]), np.asarray(atoms))  # |−g| = |g|
-
-
 def test_build_raw_convention_matches_numpy(small):
     specs, centers = small
     spec = specs[1.0]

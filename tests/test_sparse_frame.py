@@ -155,9 +155,9 @@ def test_automatic_choice_and_errors(pair, monkeypatch):
     assert isinstance(build_frame(src, centers, sparse=False), bsfjax.Frame)
     monkeypatch.setattr(frame_mod, "DENSE_BUDGET_BYTES", 4 * src.n_vertices * 3 * len(centers))
     assert isinstance(build_frame(src, centers), bsfjax.Frame)
-    import bsfjax._coding as coding_mod
+    import bsfjax._operator as operator_mod
 
-    monkeypatch.setattr(coding_mod, "DENSE_BUDGET_BYTES", 8)
+    monkeypatch.setattr(operator_mod, "DENSE_BUDGET_BYTES", 8)
     F = np.ones((1, src.n_vertices))
     with pytest.raises(BSFError, match="dense q × q Gram"):
         encode(sparse, F, "lstsq")
@@ -193,13 +193,13 @@ def test_faust_sparse_build_matches_dense():
 def test_dense_omp_host_gram_rows_match_the_gemm(pair, monkeypatch):
     """A concrete binary frame coding a large batch takes its Gram rows from a host CSR copy
     (precompute="auto"); the codes equal the full-Gram GEMM path."""
-    import bsfjax._coding as coding
+    import bsfjax._gram_rows as coding
 
     _, _, _, dense, _, _ = pair
     F = (np.random.default_rng(4).random((40, dense.n_vertices)) < 0.4).astype(np.float32)
     registered = []
-    orig = coding._HostGramRows.register
-    monkeypatch.setattr(coding._HostGramRows, "register",
+    orig = coding.HostGramRows.register
+    monkeypatch.setattr(coding.HostGramRows, "register",
                         classmethod(lambda cls, *a: registered.append(1) or orig(*a)))
     for w in (None, "area"):
         a_host, i_host = encode(dense, F, "omp", sparsity=6, weights=w, return_info=True)
@@ -209,20 +209,20 @@ def test_dense_omp_host_gram_rows_match_the_gemm(pair, monkeypatch):
                                    np.asarray(decode(dense, a_gemm)), rtol=1e-4, atol=1e-4)
         np.testing.assert_allclose(np.asarray(i_host.residual), np.asarray(i_gemm.residual),
                                    rtol=1e-5, atol=1e-5)
-    assert len(registered) == 2 and not coding._HostGramRows._live  # released after use
+    assert len(registered) == 2 and not coding.HostGramRows._live  # released after use
 
 
 def test_host_gram_rows_are_computed_once_per_atom(pair, monkeypatch):
     """Within one encode call each selected atom's Gram row is computed on the host once, however
     many functions select it; with the row budget exhausted (nothing kept) the codes are the
     same."""
-    import bsfjax._coding as coding
+    import bsfjax._gram_rows as coding
 
     _, _, _, dense, sparse, _ = pair
     F = (np.random.default_rng(5).random((30, dense.n_vertices)) < 0.3).astype(np.float32)
     F = np.concatenate([F, F])  # every atom is selected by at least two functions
     computed = []
-    orig = coding._HostGramRows.rows.__func__
+    orig = coding.HostGramRows.rows.__func__
 
     def counting(cls, token, k):
         before = sum(len(v.cache) for v in cls._live.values())
@@ -230,15 +230,15 @@ def test_host_gram_rows_are_computed_once_per_atom(pair, monkeypatch):
         computed.append(sum(len(v.cache) for v in cls._live.values()) - before)
         return out
 
-    monkeypatch.setattr(coding._HostGramRows, "rows", classmethod(counting))
+    monkeypatch.setattr(coding.HostGramRows, "rows", classmethod(counting))
     for frame in (dense, sparse):
         computed.clear()
         a = np.asarray(encode(frame, F, "omp", sparsity=6))
         # host rows were used, and fewer were computed than atoms selected (shared atoms)
         assert computed and 0 < sum(computed) < np.count_nonzero(a)
-        monkeypatch.setattr(coding, "_ROW_CACHE_BYTES", 0)
+        monkeypatch.setattr(coding, "ROW_CACHE_BYTES", 0)
         b = np.asarray(encode(frame, F, "omp", sparsity=6))
-        monkeypatch.setattr(coding, "_ROW_CACHE_BYTES", 2**28)
+        monkeypatch.setattr(coding, "ROW_CACHE_BYTES", 2**28)
         np.testing.assert_array_equal(a, b)
         np.testing.assert_array_equal(a[:30], a[30:])
 
@@ -383,18 +383,15 @@ def test_host_gram_rows_in_float64(pair):
 
 
 def test_sparse_frames_with_the_adaptive_and_hygiene_options(pair):
-    """Adaptive scales build sparse too; pruning and p2p pull-back need dense atoms and say so;
-    the lasso's target support gives the dense path's codes on a sparse frame."""
+    """Adaptive scales build sparse too; pruning and p2p pull-back work on sparse frames (see
+    test_prune_and_p2p_pull_back_on_sparse_frames); the lasso's target support gives the dense
+    path's codes on a sparse frame."""
     src, tgt, centers, dense, sparse, C = pair
     ad_dense = build_frame(src, centers, "adaptive")
     ad_sparse = build_frame(src, centers, "adaptive", sparse=True)
     np.testing.assert_array_equal(np.asarray(ad_sparse.taus), np.asarray(ad_dense.taus))
     diff = np.asarray(ad_sparse.todense()) != np.asarray(ad_dense.atoms)
     assert diff.sum() <= 4
-    with pytest.raises(BSFError, match="prune=True works on dense frames only"):
-        build_frame(src, centers, TAUS, prune=True, sparse=True)
-    with pytest.raises(BSFError, match="pulls back dense atoms"):
-        transfer_frame(sparse, C, tgt, p2p=np.arange(tgt.n_vertices))
     F = (np.asarray(src.evecs[:, 1]) > 0).astype(np.float32)[None]
     a_d = encode(dense, F, "lasso", target_atoms=6)
     a_s = encode(sparse, F, "lasso", target_atoms=6)

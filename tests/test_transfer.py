@@ -122,7 +122,7 @@ SHARDED = textwrap.dedent("""
 def _function_batch(spec):
     """OMP codes of 7 functions (not a multiple of 4: padded) in a sparse and a dense frame, a
     least-squares approximation, and whether encode took the multi-device path."""
-    import bsfjax._coding as coding
+    import bsfjax._encode as coding
 
     centers = np.arange(0, spec.n_vertices, 9)
     F = (np.random.default_rng(5).random((7, spec.n_vertices)) < 0.3).astype(np.float32)
@@ -202,5 +202,10 @@ def test_frames_beyond_the_dense_budget_run_eagerly_on_list_frames(pairs, monkey
     np.testing.assert_array_equal(np.asarray(listed.codes) != 0, np.asarray(dense.codes) != 0)
     np.testing.assert_allclose(np.asarray(listed.transferred), np.asarray(dense.transferred),
                                rtol=1e-5, atol=1e-5)
-    with pytest.raises(ValueError, match="prune=True needs a dense frame"):
-        bsfjax.transfer("omp", p, F[0], prune=True)
+    pruned = bsfjax.transfer("omp", p, F[0], sparsity=6, prune=True)
+    monkeypatch.undo()
+    masked = bsfjax.transfer("omp", p, F[0], sparsity=6, prune=True)
+    np.testing.assert_allclose(np.asarray(pruned.codes), np.asarray(masked.codes), rtol=1e-5,
+                               atol=1e-6)
+    np.testing.assert_allclose(np.asarray(pruned.transferred), np.asarray(masked.transferred),
+                               rtol=1e-5, atol=1e-5)
