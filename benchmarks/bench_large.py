@@ -138,7 +138,7 @@ def run(data: Path, levels: int, k: int, n_functions: int, cache: Path, sparsity
                   rows)
     F = random_regions(src_mesh, np.asarray(src.mass), n_functions, seed=0).astype(np.float32)
     alpha = stage(f"encode {n_functions} functions omp S={sparsity}",
-                  lambda: bsfjax.encode(frame, F, "omp", sparsity=sparsity), rows)
+                  lambda: bsfjax.encode(frame, F, "omp", sparsity=sparsity, weights=None), rows)
     C = stage("fmap_from_p2p (identity)", lambda: bsfjax.fmap_from_p2p(src, tgt, np.arange(n)),
               rows)
     tframe = stage("transfer_frame (sparse)", lambda: bsfjax.transfer_frame(frame, C, tgt), rows)

@@ -3,7 +3,7 @@
 On FAUST pairs from ``../shared/data/faust`` (the ``reproduce`` pairs, seed 0), k = 50,
 ``taus="adaptive"`` (pruned) and the paper's scales, area-weighted OMP with S = 30 (and
 least squares), random indicators as in every experiment.  The map is estimated as in the
-``sparse`` experiment (:func:`bsfjax.highlevel.estimate_map`: WKS + 5 landmarks paired by the
+``sparse`` experiment (:func:`bsfjax.estimate_map`: WKS + 5 landmarks paired by the
 ground truth, ZoomOut to 2k).  Transfer options compared on the target:
 
 * ``binary``  — paper Eq. 11–12 with the estimated C (``transfer_frame``);

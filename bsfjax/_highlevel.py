@@ -118,6 +118,9 @@ def transfer_values(source: Spectrum, target: Spectrum,
         if p2p.shape != (target.n_vertices,):
             raise BSFError(f"p2p must have one source index per target vertex "
                            f"({target.n_vertices}), got shape {p2p.shape}")
+    if p2p is None and (isinstance(method, PullBack) or getattr(method, "frame_transfer", "")
+                        == "p2p"):
+        raise BSFError(f"method {method_name(method)!r} needs a point map (p2p)")
     if C is None and not isinstance(method, PullBack):
         raise BSFError(f"method {method_name(method)!r} needs a functional map C")
     if C is not None:

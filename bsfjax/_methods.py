@@ -231,6 +231,8 @@ class BSF(_FrameSettings):
 
     def check(self, pair, k, transfer, batch):
         _check_centers("bsf", pair, batch)
+        if transfer and self.frame_transfer == "p2p":
+            _check_p2p(pair, batch, "frame_transfer='p2p'")
 
     def prepare(self, pair, F, k):
         frame = self.frame(pair, k)

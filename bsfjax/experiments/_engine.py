@@ -32,7 +32,8 @@ from .._encode import decode, encode
 from .._frame import build_frame, transfer_frame
 from .._methods import (BSF, CODER_NAMES, METHODS as _METHODS, PAPER_GAMMA, PAPER_TAUS,
                         AbstractMethod, Pair, _saturate)
-from .._transfer import TransferResult, stack_pairs, transfer
+from .._transfer import TransferResult, stack_pairs
+from .._transfer import transfer as _run_transfer
 
 METHODS = tuple(_METHODS)
 CODERS = CODER_NAMES
@@ -139,7 +140,7 @@ def run_method(method: str, pair, F, *, k: int, settings: Settings, transfer: bo
     Returns:
         ``(approximation, transferred, codes)`` (``approximation`` is ``None`` for ``p2p``).
     """
-    return transfer(settings.method(method), pair, F, k=k, transfer=transfer,
+    return _run_transfer(settings.method(method), pair, F, k=k, transfer=transfer,
                     k_targets=k_targets)
 
 

@@ -51,7 +51,7 @@ def sparse_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 100,
       (n_BSF centres, γ = 0.75, area-weighted coding), and ``lstsq`` on each frame (all atoms,
       ``sparsity = "all"``), plus ``lasso`` with ``target_atoms`` ∈ ``lasso_targets``;
     * transfer with the ground-truth map (``maps = "gt"``, paper Eq. 11–12 re-binarization)
-      and with an estimated map (``maps = "estimated"``: :func:`bsfjax.highlevel.estimate_map`,
+      and with an estimated map (``maps = "estimated"``: :func:`bsfjax.estimate_map`,
       WKS + 5 landmarks — FPS on ``N``, paired by the ground truth — ZoomOut to ``2k``), whose
       BSF transfer is done both ways, ``frame_transfer = "binary"`` (Eq. 11–12 with the
       estimated ``C``) and ``"p2p"`` (atoms pulled back through the refined point map).
