@@ -113,6 +113,13 @@ def transfer_coeffs(C, coeffs):
 transfer_coeffs_jit = jax.jit(transfer_coeffs)
 
 
+@jax.jit
+def carry_dense(C, coeffs, evecs, gammas):
+    """Paper Eq. 11–12 in one call: ``a_N = C a`` and the atoms of ``Φ_N[:, :k_N] a_N``."""
+    a = transfer_coeffs(C, coeffs)
+    return a, binarize(evecs[:, :a.shape[0]], a, gammas)
+
+
 
 
 def build_core(evals, evecs, mass, centers, taus, gammas, unit_area: bool):

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float, Int
 
-from ._binarize import build_core_jit, kernel_coeffs_jit, transfer_coeffs_jit
+from ._binarize import build_core_jit, carry_dense, kernel_coeffs_jit, transfer_coeffs_jit
 from ._dense_frame import Frame
 from ._errors import BSFError
 from ._frame_tools import (ADAPTIVE_AREA_RANGE, ADAPTIVE_N_SCALES, _check_centers,
@@ -234,6 +234,12 @@ def transfer_frame(frame: AbstractFrame, C: Float[ArrayLike, "kN kM"],
         _check_sparse_concrete(C, frame.coeffs, frame.gammas, target_spectrum.evecs)
         dtype = jax.dtypes.canonicalize_dtype(jnp.float64)
         coeffs = transfer_coeffs_jit(jnp.asarray(C, dtype), jnp.asarray(frame.coeffs, dtype))
+    elif p2p is None:  # the common case, one fused call (product, maxima, threshold)
+        coeffs, atoms = carry_dense(jnp.asarray(C), frame.coeffs,
+                                    jnp.asarray(target_spectrum.evecs), frame.gammas)
+        return Frame(atoms=atoms, coeffs=coeffs, taus=frame.taus, centers=frame.centers,
+                     mass=mass, gammas=frame.gammas, tau_convention=frame.tau_convention,
+                     columns=frame.columns)
     else:
         coeffs = transfer_coeffs_jit(jnp.asarray(C), frame.coeffs)
     if p2p is not None:
