@@ -19,6 +19,7 @@ when it is made (:class:`~bsfjax.BSFError` on a bad value).  Every coder has ``w
 
 from __future__ import annotations
 
+import abc
 import math
 import numbers
 from typing import Any, ClassVar, NamedTuple
@@ -51,14 +52,6 @@ class CodingInfo(NamedTuple):
     residual: jax.Array
     converged: jax.Array
 
-
-def check_int(name, value, lo, hi=None):
-    bounds = f"[{lo}, {hi}]" if hi is not None else f">= {lo}"
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
-        raise BSFError(f"{name} must be an integer {bounds}, got {value!r}")
-    if value < lo or (hi is not None and value > hi):
-        raise BSFError(f"{name} must be an integer {bounds}, got {value}")
-    return int(value)
 
 
 def check_positive(name, value, allow_zero=False):
@@ -133,8 +126,8 @@ class AbstractCoder(eqx.Module):
         return None
 
     @classmethod
+    @abc.abstractmethod
     def _solve(cls, frame, F, w, C, fnorm2, static: dict, dyn: dict):
         """Traced: ``(alpha, converged)`` for the ``(m, n)`` functions ``F`` with correlations
         ``C = Bᵀ W F`` ``(m, q)`` and ``fnorm2 = ‖f‖²_W``; ``converged`` is an ``(m,)`` bool
         array or a function of the squared residuals ``(m,) -> (m,)``."""
-        raise NotImplementedError

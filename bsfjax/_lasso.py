@@ -22,9 +22,9 @@ with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintaine
     from jaxopt import ProximalGradient
     from jaxopt.prox import prox_lasso
 
-from ._coders import AbstractCoder, check_int, check_positive
+from ._coders import AbstractCoder, check_positive
 from ._errors import BSFError
-from ._validate import is_traced
+from ._validate import check_int, is_traced
 
 __all__ = ["Lasso", "LASSO_DEFAULT_LAM", "LASSO_TARGET_STEPS", "LASSO_LAM_MIN"]
 
@@ -62,10 +62,10 @@ class Lasso(AbstractCoder):
     def __check_init__(self):
         if self.lam is not None:
             check_positive("lam", self.lam)
-        check_int("maxiter", self.maxiter, 1, 10**9)
+        check_int(self.maxiter, "maxiter", 1, 10**9)
         check_positive("tol", self.tol)
         if self.target_atoms is not None:
-            check_int("target_atoms", self.target_atoms, 1)
+            check_int(self.target_atoms, "target_atoms", 1)
             if self.lam is not None:
                 raise BSFError("give lam or target_atoms, not both (target_atoms chooses λ)")
             if self.init is not None:

@@ -19,6 +19,7 @@ of a sparse enough dense frame, or a sparse frame's lists), cached per call
 
 from __future__ import annotations
 
+import abc
 from typing import Any
 
 import equinox as eqx
@@ -26,10 +27,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._coders import AbstractCoder, check_int, check_positive, check_precompute, check_steps
+from ._coders import AbstractCoder, check_positive, check_precompute, check_steps
 from ._errors import BSFError
 from ._gram_rows import host_gram_rows
-from ._validate import is_traced
+from ._validate import check_int, is_traced
 
 __all__ = ["OMP", "ErrorOMP"]
 
@@ -48,8 +49,9 @@ class _AbstractOMP(AbstractCoder):
     def __check_init__(self):
         check_precompute(self.precompute)
 
+    @abc.abstractmethod
     def _n_steps(self, q: int) -> int:
-        raise NotImplementedError
+        """Largest number of atoms a code may select in a frame of ``q`` atoms."""
 
     def _mode(self, frame, w, m, q, n_steps, host: bool) -> str:
         if host:
@@ -74,8 +76,9 @@ class _AbstractOMP(AbstractCoder):
                 "chunk": max(1, min(m, _OMP_CHUNK_ELEMS // (n_steps * q)))}
 
     @classmethod
+    @abc.abstractmethod
     def _bound(cls, static, dyn, fnorm2):
-        raise NotImplementedError
+        """Traced: the squared-residual bound at which a code stops (``None``: none)."""
 
     @classmethod
     def _solve(cls, frame, F, w, C, fnorm2, static, dyn):
@@ -120,7 +123,7 @@ class OMP(_AbstractOMP):
     name = "omp"
 
     def __check_init__(self):
-        check_int("sparsity", self.sparsity, 1)
+        check_int(self.sparsity, "sparsity", 1)
 
     def _n_steps(self, q):
         return check_steps(self, "sparsity", q)
@@ -165,7 +168,7 @@ class ErrorOMP(_AbstractOMP):
 
     def __check_init__(self):
         check_positive("eps_fraction", self.eps_fraction, allow_zero=True)
-        check_int("max_atoms", self.max_atoms, 1)
+        check_int(self.max_atoms, "max_atoms", 1)
         eps = self.eps
         if eps is None or (isinstance(eps, str) and eps == "spams"):
             return
