@@ -52,12 +52,14 @@ from ._encode import CODERS, as_coder, decode, encode
 
 # transfer
 from ._methods import (BSF, METHODS, AbstractMethod, GeodesicBalls, Pair, ProductBasis,
-                       PullBack, SaturatedHeat, SpectralProjection, as_method)
+                       PullBack, RefinedPullBack, SaturatedHeat, SpectralProjection,
+                       as_method)
 from ._transfer import TransferResult, stack_pairs, transfer, transfer_pairs
 
 # functional maps
 from ._descriptors import hks, wks
 from ._fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
+from ._refine import refine_point_maps
 from ._estimation import FmapWeights, estimate_fmap, fmap_energy
 
 # mesh-level entry points
@@ -91,11 +93,12 @@ __all__ = [
     "AbstractCoder", "CodingInfo", "CODERS", "as_coder", "encode", "decode", "OMP", "ErrorOMP",
     "LeastSquares", "Lasso",
     # transfer
-    "METHODS", "AbstractMethod", "BSF", "SpectralProjection", "PullBack", "ProductBasis",
+    "METHODS", "AbstractMethod", "BSF", "SpectralProjection", "PullBack", "RefinedPullBack", "ProductBasis",
     "GeodesicBalls", "SaturatedHeat", "as_method", "Pair", "TransferResult", "transfer",
     "transfer_pairs", "stack_pairs",
     # functional maps
     "hks", "wks", "fmap_from_p2p", "fmap_to_p2p", "icp_refine", "nearest_neighbors", "zoomout",
+    "refine_point_maps",
     "FmapWeights", "estimate_fmap", "fmap_energy",
     # mesh level
     "MapEstimate", "estimate_map", "LabelTransfer", "transfer_values", "transfer_labels",

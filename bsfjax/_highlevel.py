@@ -13,19 +13,20 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float, Int
 
-from ._methods import (AbstractMethod, BSF, GeodesicBalls, PullBack, SaturatedHeat, SpectralProjection,
-                       as_method, method_name)
+from ._methods import (AbstractMethod, BSF, GeodesicBalls, PullBack, RefinedPullBack, SaturatedHeat,
+                       SpectralProjection, as_method, method_name)
 from ._transfer import Pair, transfer
 from ._descriptors import wks
 from ._errors import BSFError
-from ._estimation import estimate_fmap
+from ._estimation import FmapWeights, estimate_fmap
 from ._geodesics import geodesic_distances
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._indicators import labels_to_indicators
 from ._sampling import farthest_point_sampling
 from ._spectrum import Spectrum
 
-__all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", "LabelTransfer"]
+__all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", "LabelTransfer",
+           "REGIMES"]
 
 class MapEstimate(NamedTuple):
     C: np.ndarray  #: ``(k, k)`` functional map source → target
@@ -47,8 +48,14 @@ def _check_landmarks(landmarks, n_m: int, n_n: int):
     return src, tgt
 
 
+#: Weight of the orientation-preserving term when :func:`estimate_map` has no landmarks but
+#: the meshes (the flips it avoids: docs/results.md, "Real segmentations").
+ORIENT_WEIGHT = 1.0
+
+
 def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=None,
-                 refine_to: int | None = None, n_energies: int = 100) -> MapEstimate:
+                 refine_to: int | None = None, n_energies: int = 100, source_mesh=None,
+                 target_mesh=None) -> MapEstimate:
     """Estimate a ``k × k`` functional map from descriptors (and optional landmarks).
 
     WKS descriptors (plus WKS functions centred at the landmarks) with descriptor preservation,
@@ -59,7 +66,12 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     Args:
         source, target: spectra with at least ``max(k, refine_to)`` eigenpairs.
         landmarks: ``(source_indices, target_indices)`` of equal length, or ``None``.  Without
-            landmarks an intrinsically symmetric shape may be matched to its mirror image.
+            landmarks an intrinsically symmetric shape may be matched to its mirror image,
+            unless the meshes are given (below).
+        source_mesh, target_mesh: the :class:`~bsfjax.Mesh` of each spectrum.  Without
+            landmarks they switch on the orientation-preserving term of
+            :func:`bsfjax.estimate_fmap` (weight :data:`ORIENT_WEIGHT`), which tells a shape
+            from its mirror image; with landmarks they are not used.
     """
     km = min(source.k, target.k)
     if not isinstance(k, (int, np.integer)) or not 1 <= k <= km:
@@ -73,7 +85,12 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     if lm is not None:
         dm.append(wks(source, n_energies, landmarks=lm[0], k=k))
         dn.append(wks(target, n_energies, landmarks=lm[1], k=k))
-    C0 = estimate_fmap(source, target, jnp.concatenate(dm, axis=1), jnp.concatenate(dn, axis=1), k=k)
+    extra = {}
+    if lm is None and source_mesh is not None and target_mesh is not None:
+        extra = dict(weights=FmapWeights(orient=ORIENT_WEIGHT), source_mesh=source_mesh,
+                     target_mesh=target_mesh)
+    C0 = estimate_fmap(source, target, jnp.concatenate(dm, axis=1), jnp.concatenate(dn, axis=1),
+                       k=k, **extra)
     C_ref = zoomout(C0, source, target, refine_to) if refine_to > k else C0
     p2p = np.asarray(fmap_to_p2p(C_ref, source, target))
     C = np.asarray(fmap_from_p2p(source.truncate(k), target.truncate(k), p2p))
@@ -121,8 +138,10 @@ def transfer_values(source: Spectrum, target: Spectrum,
     if p2p is None and (isinstance(method, PullBack) or getattr(method, "frame_transfer", "")
                         == "p2p"):
         raise BSFError(f"method {method_name(method)!r} needs a point map (p2p)")
-    if C is None and not isinstance(method, PullBack):
-        raise BSFError(f"method {method_name(method)!r} needs a functional map C")
+    if C is None and not isinstance(method, PullBack) and not (
+            isinstance(method, RefinedPullBack) and p2p is not None):
+        raise BSFError(f"method {method_name(method)!r} needs a functional map C"
+                       + (" or a point map p2p" if isinstance(method, RefinedPullBack) else ""))
     if C is not None:
         C = np.asarray(C)
         if C.ndim != 2:
@@ -138,9 +157,11 @@ def transfer_values(source: Spectrum, target: Spectrum,
             raise BSFError("method 'geod' needs the source mesh (mesh=) for geodesic distances")
         distances = geodesic_distances(mesh, centers)
     kn = C.shape[0] if C is not None else target.k
-    pair = Pair(source=source.truncate(k) if not isinstance(method, SpectralProjection)
-                or method.factor == 1 else source,
-                target=target.truncate(kn), C=C, centers=None if centers is None
+    full = getattr(method, "full_spectra", False)  # "refined" grows the map past k
+    pair = Pair(source=source if full or (isinstance(method, SpectralProjection)
+                                          and method.factor == 2) else source.truncate(k),
+                target=target if full else target.truncate(kn), C=C,
+                centers=None if centers is None
                 else np.asarray(centers), p2p=p2p,
                 distances=distances)
     res = transfer(method, pair, f, k=k)
@@ -152,26 +173,74 @@ class LabelTransfer(NamedTuple):
     labels: np.ndarray  #: ``(n_N,)`` int, −1 where unassigned
     scores: np.ndarray  #: ``(L, n_N)`` transferred indicator of each label
     unassigned_share: float  #: area share of the target left unassigned
+    #: area share of the target where the labels equal the pull-back through the input point
+    #: map (``None`` without ``p2p``)
+    agreement: float | None = None
+    #: area-weighted mean of the winning score (for ``"refined"``: the share of its maps that
+    #: vote for the label it gives)
+    confidence: float | None = None
+    #: ``"refined"`` only: how much the refinement changed the input map's labels — see
+    #: :data:`REGIMES`; ``None`` for the other methods
+    regime: str | None = None
+
+
+#: Regimes of the ``"refined"`` transfer (from the map alone, never from ground truth):
+#: ``"kept"``: the labels agree with the input map's pull-back on ≥ 99 % of the area (the
+#: input was already at the refinement's fixed point); ``"refined"``: 90–99 %; ``"corrected"``:
+#: the input map was rewritten on more than 10 % of the area (a crude or partly wrong map: check
+#: the result); ``"unreliable"``: the refined maps disagree (confidence < 0.8), so the map is
+#: not converging and the labels should not be trusted.
+REGIMES = ("kept", "refined", "corrected", "unreliable")
+
+
+def _regime(agreement: float | None, confidence: float) -> str:
+    if confidence < 0.8:
+        return "unreliable"
+    if agreement is None or agreement >= 0.99:
+        return "kept" if agreement is not None else "refined"
+    return "refined" if agreement >= 0.9 else "corrected"
 
 
 def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, " n_M"], *,
-                    threshold: float = 0.5, **kwargs) -> LabelTransfer:
+                    method: AbstractMethod | str = "refined", threshold: float | None = None,
+                    **kwargs) -> LabelTransfer:
     """Transfer a segmentation: one step function per label, then arg-max on the target.
 
     ``labels`` ``(n_M,)`` non-negative ints.  Each label's indicator is transferred with
-    :func:`transfer_values` (``**kwargs``: ``C``, ``p2p``, ``method``, …); a target vertex takes
-    the label with the largest transferred value, or −1 ("unassigned") when that value is below
-    ``threshold`` (the midpoint of an indicator's two values by default).
+    :func:`transfer_values` (``**kwargs``: ``C``, ``p2p``, …); a target vertex takes the label
+    with the largest transferred value, or −1 ("unassigned") when that value is below
+    ``threshold``.
+
+    **Arguments:**
+
+    - ``method``: default ``"refined"`` (:class:`~bsfjax.RefinedPullBack`: the most accurate
+      from an estimated map; needs ``p2p`` or ``C`` and spectra of ~100 eigenpairs); ``"p2p"``
+      for a map that is already right (a registration); the paper's BSF is ``"omp"``.
+    - ``threshold``: default 0.5 (the midpoint of an indicator's two values) and 0 for
+      ``"refined"``, whose scores are vote shares (every vertex takes its plurality label).
     """
     lab = np.asarray(labels)
     if lab.shape != (source.n_vertices,):
         raise BSFError(f"labels must have one entry per source vertex ({source.n_vertices}), got "
                        f"shape {lab.shape}")
+    inputs = {"C", "p2p", "k", "centers", "n_bsf", "seed", "mesh"}  # the rest: method options
+    method = as_method(method, **{k: v for k, v in kwargs.items() if k not in inputs})
+    kwargs = {k: v for k, v in kwargs.items() if k in inputs}
+    refined = isinstance(method, RefinedPullBack)
+    if threshold is None:
+        threshold = 0.0 if refined else 0.5
     if not 0 <= threshold < 1:
         raise BSFError(f"threshold must be in [0, 1), got {threshold!r}")
-    scores = transfer_values(source, target, np.asarray(labels_to_indicators(lab)), **kwargs)
+    scores = transfer_values(source, target, np.asarray(labels_to_indicators(lab)),
+                             method=method, **kwargs)
     best = scores.max(axis=0)
     out = np.where(best < threshold, -1, scores.argmax(axis=0))
-    share = float(np.sum(np.asarray(target.mass) * (out < 0)) / np.sum(target.mass))
-    return LabelTransfer(labels=out, scores=scores, unassigned_share=share)
-
+    mass = np.asarray(target.mass, dtype=float)
+    share = float(np.sum(mass * (out < 0)) / np.sum(mass))
+    p2p = kwargs.get("p2p")
+    agreement = (None if p2p is None else
+                 float(np.sum(mass * (lab[np.asarray(p2p)] == out)) / np.sum(mass)))
+    confidence = float(np.sum(mass * best) / np.sum(mass))
+    return LabelTransfer(labels=out, scores=scores, unassigned_share=share, agreement=agreement,
+                         confidence=confidence,
+                         regime=_regime(agreement, confidence) if refined else None)

@@ -50,9 +50,13 @@ from ._sparse_frame import SparseFrame
 from ._lstsq import LeastSquares
 from ._omp import OMP
 from ._spectrum import Spectrum
+from ._fmap import _chunk_for
+from ._refine import check_options as check_refine_options, refine_core, start_point_map
+from ._refine import sizes_for as refine_sizes_for
+from ._validate import check_finite
 
 __all__ = ["AbstractMethod", "BSF", "SpectralProjection", "PullBack", "ProductBasis",
-           "GeodesicBalls", "SaturatedHeat", "METHODS", "as_method", "Pair",
+           "GeodesicBalls", "SaturatedHeat", "RefinedPullBack", "METHODS", "as_method", "Pair",
            "PAPER_TAUS", "PAPER_GAMMA", "product_basis", "geodesic_ball_radii"]
 
 #: The paper's diffusion scales (unit-area convention) and threshold.
@@ -303,6 +307,75 @@ class PullBack(AbstractMethod):
         return None, lambda C: F[:, pair.p2p], None
 
 
+class RefinedPullBack(AbstractMethod):
+    r"""``"refined"`` (default of :func:`bsfjax.transfer_labels` and ``bsfjax transfer``): the
+    pull-back through a refined map, averaged over its last point maps.
+
+    The input point map ``pair.p2p`` (or, without one, the point map of ``pair.C``) is refined
+    by the descriptor-guided ZoomOut continuation of :mod:`bsfjax._refine` from ``k_start`` to
+    ``k_max`` eigenpairs (default: all that both spectra hold) and the functions are pulled
+    back through each of the last ``n_vote`` point maps ``T_t``: ``f̃_N = (1/T) Σ_t f ∘ T_t``.
+    For indicators the arg-max of ``f̃_N`` is the majority vote of the maps.  It uses the whole
+    spectra it is given, not ``k``: give them ``k_max`` eigenpairs (the CLI computes 100).
+    A map better than the continuation's fixed point (a registration, a ground truth) is
+    better used as is: ``"p2p"``.
+
+    **Arguments:** ``k_start``, ``k_max``, ``step``, ``n_vote``, ``descriptor_weight``,
+    ``descriptor_dims``, ``n_energies`` as in :func:`bsfjax.refine_point_maps` (its
+    ``n_keep`` is ``n_vote``).
+    """
+
+    k_start: int = eqx.field(static=True, default=60, kw_only=True)
+    k_max: int | None = eqx.field(static=True, default=None, kw_only=True)
+    step: int = eqx.field(static=True, default=20, kw_only=True)
+    n_vote: int = eqx.field(static=True, default=3, kw_only=True)
+    descriptor_weight: float = eqx.field(static=True, default=0.5, kw_only=True)
+    descriptor_dims: int = eqx.field(static=True, default=8, kw_only=True)
+    n_energies: int = eqx.field(static=True, default=100, kw_only=True)
+
+    name: ClassVar[str] = "refined"
+    transfer_only: ClassVar[bool] = True
+    own_map: ClassVar[bool] = True
+    #: runs on the whole spectra of the pair (the mesh-level calls do not truncate them to k)
+    full_spectra: ClassVar[bool] = True
+
+    def __check_init__(self):
+        check_refine_options(k_start=self.k_start, k_max=self.k_max, step=self.step,
+                             n_keep=self.n_vote, descriptor_weight=self.descriptor_weight,
+                             descriptor_dims=self.descriptor_dims, n_energies=self.n_energies)
+
+    def sizes(self, k_source: int, k_target: int) -> tuple[int, ...]:
+        return refine_sizes_for(k_source, k_target, self.k_start, self.k_max, self.step)
+
+    def check(self, pair, k, transfer, batch):
+        if not transfer:
+            return
+        if pair.p2p is not None:
+            _check_p2p(pair, batch, "method 'refined'")
+        elif pair.C is None:
+            raise BSFError("method 'refined' needs pair.p2p (a point map to refine) or pair.C")
+        else:
+            kn, km = _shape(pair.C)[batch:]
+            if km > np.shape(pair.source.evecs)[-1] or kn > np.shape(pair.target.evecs)[-1]:
+                raise BSFError(f"pair.C {_shape(pair.C)} is larger than the spectra")
+            check_finite(pair.C, "pair.C")
+        self.sizes(np.shape(pair.source.evecs)[-1], np.shape(pair.target.evecs)[-1])
+
+    def prepare(self, pair, F, k):
+        n_m, n_n = np.shape(pair.source.evecs)[-2], np.shape(pair.target.evecs)[-2]
+        chunk = _chunk_for(n_m, n_n, None)
+        sizes = self.sizes(np.shape(pair.source.evecs)[-1], np.shape(pair.target.evecs)[-1])
+        p0 = start_point_map(pair.p2p, pair.C, pair.source, pair.target, chunk)
+        maps = refine_core(p0, pair.source, pair.target, sizes=sizes,
+                           n_keep=min(self.n_vote, len(sizes)),
+                           weight=float(self.descriptor_weight), dims=self.descriptor_dims,
+                           n_energies=self.n_energies, chunk=chunk)
+        # later (more refined) maps weigh a little more: a three-way tie goes to the last map
+        w = 1.0 + 1e-3 * jnp.arange(maps.shape[0], dtype=F.dtype)
+        w = w / jnp.sum(w)
+        return None, lambda C: jnp.einsum("t,mtn->mn", w, F[:, maps]), None
+
+
 def product_basis(evecs: jax.Array) -> jax.Array:
     """``(n, k(k+1)/2)`` products ``φ_i φ_j``, ``i ≤ j`` in ``numpy.triu_indices`` order."""
     k = evecs.shape[-1]
@@ -446,6 +519,7 @@ METHODS: dict[str, AbstractMethod] = {
     "std": SpectralProjection(),
     "std2": SpectralProjection(factor=2),
     "p2p": PullBack(),
+    "refined": RefinedPullBack(),
     "prod": ProductBasis(),
     "geod": GeodesicBalls(),
     "heat": SaturatedHeat(),

@@ -139,9 +139,12 @@ def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pai
                        "would be f itself)")
     batched = np.ndim(pair.source.evals) == 2
     if k is None:
-        if pair.C is None:
+        if pair.C is not None:
+            k = int(np.shape(pair.C)[-1])
+        elif method.transfer_only:  # "p2p", "refined": no basis size of their own
+            k = 1
+        else:
             raise BSFError("k must be given when pair.C is None")
-        k = int(np.shape(pair.C)[-1])
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
         raise BSFError(f"k must be a positive int, got {k!r}")
     k = int(k)

@@ -50,12 +50,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "vertex index per target vertex) or 'fmap FILE' (k x k matrix, source -> target)")
     p.add_argument("--landmarks", help="landmark vertex indices 'i,j,...:i2,j2,...' (source:target)")
     p.add_argument("-k", type=int, default=30, help="spectral basis size (default 30)")
-    p.add_argument("--method", default="omp",
-                   help="transfer method: omp (default), omp_error, lstsq, lasso (BSF coders), "
-                        "p2p (pull-back), std, prod, geod, heat")
+    p.add_argument("--method", default=None,
+                   help="transfer method: refined (default: pull-back through the refined map; "
+                        "with '--map p2p FILE' the default is p2p, the given map as it is), p2p "
+                        "(pull-back), omp, omp_error, lstsq, lasso (the paper's BSF coders), std, "
+                        "prod, geod, heat")
     p.add_argument("--mesh-out", help="also write the target mesh coloured by the result (.ply)")
-    p.add_argument("--threshold", type=float, default=0.5,
-                   help="labels: a target vertex whose best score is below this is unassigned (-1)")
+    p.add_argument("--threshold", type=float, default=None,
+                   help="labels: a target vertex whose best score is below this is unassigned (-1) "
+                        "(default 0.5; 0 for 'refined', whose scores are vote shares)")
     p.add_argument("--truth", help="labels: ground-truth label per target vertex (.txt or .npy); "
                                    "report the share of the target's area labelled correctly")
     p.set_defaults(func=_cmd_transfer)
@@ -84,6 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "experiment's (fig7: k_M values; fig10, sparse: its k)")
     p.add_argument("--cache", default=None, help="eigenbasis cache folder (default OUT/.spectra)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--segmentation", default=None, help="template part labels for 'segmentation' "
+                   "(.json {part: [vertices]} as SMPL's, or one label per template vertex)")
     p.set_defaults(func=lambda a: __import__("bsfjax.experiments", fromlist=["x"]).cli(a))
     return parser
 
@@ -159,6 +164,8 @@ def _cmd_transfer(args) -> int:
     from ._spectrum import spectrum
 
     names = tuple(m for m in METHODS if m not in CLI_EXCLUDED)
+    if args.method is None:  # a given point map is trusted as it is; an estimated one is refined
+        args.method = "p2p" if args.map[0] == "p2p" else "refined"
     if args.method not in names:
         raise CLIError(f"--method must be one of {', '.join(names)}, got {args.method!r}")
     if Path(args.out).suffix not in (".npy", ".txt"):
@@ -201,6 +208,11 @@ def _cmd_transfer(args) -> int:
         if C.ndim != 2 or C.shape[0] != C.shape[1]:
             raise CLIError(f"fmap file {rest[0]}: expected a square k x k matrix, got shape {C.shape}")
         k = k_spec = C.shape[0]
+    k_map = k_spec  # the estimated map's ZoomOut size; 'refined' continues it further
+    if args.method == "refined":
+        from ._refine import REFINE_EIGENPAIRS
+
+        k_spec = min(max(k_spec, REFINE_EIGENPAIRS), kmax)
     sm, sn = spectrum(source, k_spec), spectrum(target, k_spec)
     print(f"spectra: {source.n_vertices} and {target.n_vertices} vertices, k = {k_spec}", file=sys.stderr)
     if kind == "p2p":
@@ -214,16 +226,22 @@ def _cmd_transfer(args) -> int:
     elif kind == "estimate":
         if landmarks is None:
             warnings.warn("no --landmarks: an intrinsically symmetric shape may be matched to its "
-                          "mirror image", stacklevel=1)
-        est = estimate_map(sm, sn, k=k, landmarks=landmarks, refine_to=k_spec)
+                          "mirror image (an orientation term makes it less likely)", stacklevel=1)
+        est = estimate_map(sm.truncate(k_map), sn.truncate(k_map), k=k, landmarks=landmarks,
+                           refine_to=k_map, source_mesh=source, target_mesh=target)
         C, p2p = est.C, est.p2p
-        print(f"estimated a {k}x{k} map (ZoomOut to {k_spec})", file=sys.stderr)
+        print(f"estimated a {k}x{k} map (ZoomOut to {k_map})", file=sys.stderr)
     common = dict(C=C, p2p=p2p, method=args.method, mesh=source)
     if args.labels:
         res = transfer_labels(sm, sn, values, threshold=args.threshold, **common)
         result = res.labels.astype(np.int64)
         print(f"transferred {int(values.max()) + 1} labels with {args.method}; unassigned: "
               f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
+        if res.regime is not None:
+            agree = "" if res.agreement is None else f", {res.agreement:.1%} of the area as the " \
+                                                      "input map's pull-back"
+            print(f"regime: {res.regime} (vote confidence {res.confidence:.2f}{agree})",
+                  file=sys.stderr)
         if truth is not None:
             area = np.asarray(sn.mass)
             correct = result == truth

@@ -23,9 +23,11 @@ def test_demo_writes_results_and_figures(tmp_path):
     assert data["example"]["n_vertices"] == 2018
     rows = {(r["map"], r["method"]): r for r in data["errors"]}
     assert set(rows) == {(m, s) for m in ("ground truth", "estimated")
-                         for s in ("p2p", "std", "omp")}
+                         for s in ("p2p", "refined", "std", "omp")}
     for (m, s), r in rows.items():
-        if s == "p2p":  # the pull-back has no approximation; exact with the exact point map
+        if s == "refined":  # a pull-back too: no approximation
+            assert r["approximation_error"] is None
+        elif s == "p2p":  # the pull-back has no approximation; exact with the exact point map
             assert r["approximation_error"] is None
             assert (r["transfer_error"] == 0) == (m == "ground truth")
         else:
@@ -33,6 +35,10 @@ def test_demo_writes_results_and_figures(tmp_path):
         assert 0 <= r["transfer_error"] < 1
         assert r["segmentation_accuracy"] > 0.8  # six large parts on a near-isometric pair
     assert rows[("ground truth", "p2p")]["segmentation_accuracy"] == 1.0
+    # the default method: at least the pull-back through the estimated map, nothing unassigned
+    est = rows[("estimated", "refined")]
+    assert est["segmentation_accuracy"] >= rows[("estimated", "p2p")]["segmentation_accuracy"]
+    assert est["unassigned_share"] == 0.0
     # the refined estimated map is close to the identity ground truth
     assert data["map_geodesic_error"]["refined"] < data["map_geodesic_error"]["estimated"]
     assert data["map_geodesic_error"]["refined"] < 0.05

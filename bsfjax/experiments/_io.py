@@ -7,7 +7,7 @@ run leaves no partial file.
 from __future__ import annotations
 
 import csv
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NamedTuple
 
@@ -35,6 +35,8 @@ class Report(NamedTuple):
     markdown: str
     panels: list | None = None
     settings: str | None = None
+    #: ``figure(path) -> path`` writes a figure of its own (instead of ``panels``' line plot)
+    figure: Callable[[Path], Path] | None = None
 
 
 def summarize(rows: Sequence[dict], by: Sequence[str], value: str = "error") -> list[dict]:
@@ -107,10 +109,11 @@ def write_csv(rows: Sequence[dict], path) -> Path:
         path: the ``.csv`` file to write.
     """
     path = Path(path)
-    keys = list(dict.fromkeys(k for r in rows for k in r))
+    # keys starting with "_" carry per-vertex payloads for figures, not table columns
+    keys = [k for k in dict.fromkeys(k for r in rows for k in r) if not k.startswith("_")]
     with atomic_path(path) as tmp:
         with open(tmp, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=keys)
+            w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
             w.writeheader()
             w.writerows(rows)
     return path

@@ -20,7 +20,7 @@ import jax
 import numpy as np
 
 from .._errors import BSFError
-from . import fig7, fig10, sparse, table1, table2, table3, table4, table5
+from . import fig7, fig10, segmentation, sparse, table1, table2, table3, table4, table5
 from ._datasets import load_dataset
 from ._io import PAPER_SETTINGS, Report, _header, _line_plot, _write_text, write_csv
 
@@ -46,6 +46,8 @@ class Experiment:
     default_ks: tuple[int, ...]
     report: Callable[[list[dict], tuple[int, ...]], Report]
     uses_functions: bool = True
+    #: ``run`` takes ``segmentation=`` (a template segmentation file) and needs it
+    uses_segmentation: bool = False
 
 
 def _entry(name: str, module, **kw) -> Experiment:
@@ -65,11 +67,12 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     _entry("table5", table5),
     _entry("fig10", fig10),
     _entry("sparse", sparse),
+    _entry("segmentation", segmentation, uses_functions=False, uses_segmentation=True),
 )}
 
 
 def reproduce(name: str, data, out, *, pairs: int = 2, functions: int = 100, seed: int = 0,
-              ks=None, cache_dir=None, progress: bool = True) -> dict:
+              ks=None, cache_dir=None, progress: bool = True, segmentation=None) -> dict:
     """Run one experiment on a ``--data`` folder and write ``NAME.csv``, ``NAME.md``,
     ``NAME.json`` (and ``NAME.png`` for figures) into ``out``.
 
@@ -84,6 +87,7 @@ def reproduce(name: str, data, out, *, pairs: int = 2, functions: int = 100, see
             fig10, sparse: the first entry is the k).
         cache_dir: eigenbasis cache folder (default ``out/.spectra``).
         progress: show progress bars.
+        segmentation: template segmentation file (experiments that use one: ``segmentation``).
 
     Returns:
         ``{"rows", "files", "seconds"}``.
@@ -106,14 +110,22 @@ def reproduce(name: str, data, out, *, pairs: int = 2, functions: int = 100, see
     if not exp.uses_functions:
         del meta["functions per shape"]
     ks = tuple(ks) if ks else exp.default_ks
+    extra = {}
+    if exp.uses_segmentation:
+        extra["segmentation"] = segmentation
+        meta["segmentation"] = str(segmentation)
+    elif segmentation is not None:
+        raise BSFError(f"experiment {name!r} takes no segmentation")
     rows = exp.run(dataset, pairs=pairs, functions=functions, ks=ks, seed=seed,
-                   cache_dir=cache_dir, progress=progress)
+                   cache_dir=cache_dir, progress=progress, **extra)
     rep = exp.report(rows, ks)
     if rep.settings is not None:
         meta["settings"] = rep.settings
     stem = out / name
     files = []
-    if rep.panels is not None:
+    if rep.figure is not None:
+        files.append(rep.figure(stem.with_suffix(".png")))
+    elif rep.panels is not None:
         files.append(_line_plot(rep.panels, stem.with_suffix(".png")))
     seconds = time.perf_counter() - t0
     meta["wall time (s)"] = round(seconds, 1)
@@ -134,7 +146,8 @@ def cli(args) -> int:
         except ValueError:
             raise BSFError(f"--k must be comma-separated integers, got {args.k!r}") from None
     res = reproduce(args.name, args.data, args.out, pairs=args.pairs, functions=args.functions,
-                    seed=args.seed, ks=ks, cache_dir=args.cache, progress=not args.no_progress)
+                    seed=args.seed, ks=ks, cache_dir=args.cache, progress=not args.no_progress,
+                    segmentation=args.segmentation)
     print(f"{args.name}: {len(res['rows'])} rows in {res['seconds']:.1f} s; wrote "
           + ", ".join(str(f) for f in res["files"]))
     return 0

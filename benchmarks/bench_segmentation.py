@@ -1,0 +1,99 @@
+"""Issue 14's check: SMPL parts carried across FAUST and FAUST_5k pairs by every method.
+
+Runs :func:`bsfjax.experiments.segmentation.segmentation_experiment` on named pairs of
+``../shared/data`` (six FAUST pairs, same person and other person; three FAUST_5k pairs), all
+methods through the default estimated map, and the fast ones also through the crude k = 20 and
+the ground-truth maps; then times the default transfer (``transfer_labels``, method
+``"refined"``) after the map on one FAUST pair: median of ``--repeats`` warm calls.
+
+    python benchmarks/bench_segmentation.py --out /tmp/seg [--data ../shared/data]
+
+Writes ``segmentation_bench.csv`` and ``segmentation_bench.md`` into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import bsfjax as bj
+from bsfjax.experiments._datasets import load_dataset
+from bsfjax.experiments._io import write_csv
+from bsfjax.experiments.segmentation import (METHODS, load_segmentation, report,
+                                             segmentation_experiment, shape_labels)
+
+PAIRS = {"faust": [("000", "001"), ("010", "012"), ("020", "022"), ("000", "010"),
+                   ("001", "021"), ("012", "022")],
+         "faust_5k": [("000", "001"), ("000", "010"), ("001", "011")]}
+FAST = ("p2p", "refined", "std", "omp", "lstsq")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--cache", default=str(Path.home() / ".cache" / "bsfjax-spectra"))
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--quick", action="store_true", help="only p2p and refined, default map")
+    args = ap.parse_args(argv)
+    data = Path(args.data)
+    seg = data / "segmentations" / "smpl_vert_segmentation.json"
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for name, pairs in PAIRS.items():
+        ds = load_dataset(data / name)
+        index = {e.name: i for i, e in enumerate(ds.shapes)}
+        ids = [(index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]) for a, b in pairs]
+        runs = ([(("p2p", "refined"), ("default",))] if args.quick else
+                [(tuple(METHODS), ("default",)), (FAST, ("crude", "truth"))])
+        for methods, maps in runs:
+            t0 = time.perf_counter()
+            part = segmentation_experiment(ds, segmentation=seg, methods=methods, maps=maps,
+                                           cache_dir=args.cache, pair_list=ids,
+                                           keep_labels=1 if name == "faust" else 0,
+                                           progress=True)
+            for r in part:  # the two folders share shape names
+                r["source"] = f"{name}/{r['source']}"
+            rows += part
+            print(f"{name} {maps}: {len(part)} rows in {time.perf_counter() - t0:.0f} s",
+                  file=sys.stderr)
+    # the default transfer after the map, warm (FAUST 000 -> 010, the CLI's default map)
+    ds = load_dataset(data / "faust")
+    template, _ = load_segmentation(seg)
+    src, tgt = ds.shapes[0], ds.shapes[[e.name for e in ds.shapes].index("tr_reg_010")]
+    sm, sn = (bj.spectrum(e.mesh, 100, cache_dir=args.cache) for e in (src, tgt))
+    lm = bj.farthest_point_sampling(src.mesh, 5)
+    est = bj.estimate_map(sm.truncate(60), sn.truncate(60), k=30, landmarks=(lm, lm),
+                          refine_to=60)
+    lab = shape_labels(ds, 0, template)
+    times = []
+    for _ in range(args.repeats + 1):
+        t0 = time.perf_counter()
+        bj.transfer_labels(sm, sn, lab, C=est.C, p2p=est.p2p)
+        times.append(time.perf_counter() - t0)
+    rep = report(rows, (30,))
+    if rep.figure is not None:
+        rep.figure(out / "segmentation_bench.png")
+    for r in rows:
+        for k in [k for k in r if k.startswith("_")]:
+            del r[k]
+    write_csv(rows, out / "segmentation_bench.csv")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    timing = (f"Default transfer after the map (transfer_labels, 'refined', 24 parts, FAUST "
+              f"000→010, 6890 vertices): first call {times[0]:.2f} s (compilation), median of "
+              f"{args.repeats} warm calls {np.median(times[1:]):.3f} s; {os.cpu_count()} CPUs, "
+              f"load average {load:.1f}, {platform.machine()}.")
+    (out / "segmentation_bench.md").write_text(rep.markdown + "\n\n" + timing + "\n")
+    print(timing)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,323 @@
+"""Real segmentations: a part labelling of a template carried to other shapes (issue 14).
+
+Not in the paper.  A segmentation of the template (the SMPL body parts of the FAUST
+registrations, ``../shared/data/segmentations/``) labels every shape of a ``--data`` folder:
+a shape with the template's vertex count is in the template's vertex order (FAUST
+registrations); a remeshed shape (``faust_5k``) is labelled through its ``.vts`` entries and the
+folder's ``corres/sampleID.vts`` (template vertex of each ``.vts`` entry), a vertex named by no
+entry taking the label of its Euclidean-nearest named vertex.
+
+For each pair and each of three maps — ``default`` (what ``bsfjax transfer`` estimates: WKS +
+5 landmarks by Euclidean FPS on the source with their ground-truth images, k = 30, ZoomOut to
+60), ``crude`` (k = 20, no refinement, same landmarks) and ``truth`` (the ground-truth point
+map and its functional map) — every method labels the target through the same map, and the
+rows give: area share labelled correctly, unassigned share, mean and worst per-part IoU
+(area-weighted, over the parts of the true target labelling), accuracy in a band of
+``BAND`` · √area around the true part borders, and seconds (after the map; first call
+includes compilation).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.spatial
+from tqdm.auto import tqdm
+
+from .._errors import BSFError
+from .._fmap import fmap_from_p2p
+from .._highlevel import estimate_map, transfer_labels
+from .._mesh import mesh_edges
+from .._refine import REFINE_EIGENPAIRS
+from .._sampling import farthest_point_sampling
+from .._spectrum import spectrum
+from ._datasets import Dataset
+from ._io import Report, pivot_markdown
+
+__all__ = ["segmentation_experiment", "load_segmentation", "shape_labels", "label_metrics",
+           "MAPS", "METHODS"]
+
+DEFAULT_KS = (30,)
+DESCRIPTION = ("Segmentation transfer (not in the paper): a template's part labelling carried "
+               "to other shapes through the same map by each method; area accuracy, IoU, "
+               "border accuracy.")
+#: The maps every method is run through (see the module doc).
+MAPS = ("default", "crude", "truth")
+#: Method labels → (method name, options): the BSF coders with the paper's and the adaptive
+#: frame.
+METHODS = {"p2p": ("p2p", {}), "refined": ("refined", {}), "std": ("std", {}),
+           **{c: (c, {}) for c in ("omp", "omp_error", "lstsq", "lasso")},
+           **{f"{c} adaptive": (c, {"taus": "adaptive"})
+              for c in ("omp", "omp_error", "lstsq", "lasso")}}
+#: Width of the border band, in units of √(target area).
+BAND = 0.02
+#: Landmarks of the estimated maps (Euclidean FPS on the source, ground-truth images).
+N_LANDMARKS = 5
+#: Eigenpairs of the spectra (the ``"refined"`` method continues the map to this size).
+K_SPECTRA = REFINE_EIGENPAIRS
+
+
+def load_segmentation(path) -> tuple[np.ndarray, tuple[str, ...]]:
+    """``(labels, names)`` of a template segmentation file.
+
+    ``.json``: ``{part name: [vertex indices]}`` (the SMPL format); a vertex listed in several
+    parts takes the first in sorted name order; every vertex up to the largest index must be
+    listed.  ``.txt`` / ``.npy``: one integer label per template vertex (names ``"0"``, …).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise BSFError(f"segmentation file {path}: no such file")
+    if path.suffix.lower() == ".json":
+        try:
+            parts = json.loads(path.read_text())
+            names = tuple(sorted(parts))
+            idx = [np.asarray(parts[n], dtype=np.int64).ravel() for n in names]
+        except (ValueError, TypeError, AttributeError) as exc:
+            raise BSFError(f"segmentation file {path}: expected {{part name: [vertex indices]}} "
+                           f"({exc})") from None
+        if not names or any(i.size and i.min() < 0 for i in idx):
+            raise BSFError(f"segmentation file {path}: no parts, or negative vertex indices")
+        lab = np.full(1 + max(int(i.max()) for i in idx if i.size), -1, np.int64)
+        for i in reversed(range(len(names))):  # reversed: the first name wins
+            lab[idx[i]] = i
+        if (lab < 0).any():
+            raise BSFError(f"segmentation file {path}: {int((lab < 0).sum())} vertices are in no "
+                           f"part (first: {int(np.flatnonzero(lab < 0)[0])})")
+        return lab, names
+    try:
+        lab = np.load(path) if path.suffix.lower() == ".npy" else np.loadtxt(path)
+    except (OSError, ValueError) as exc:
+        raise BSFError(f"segmentation file {path}: unreadable ({exc})") from None
+    lab = np.asarray(lab)
+    if lab.ndim != 1 or lab.size == 0 or not np.all(np.mod(lab, 1) == 0) or lab.min() < 0:
+        raise BSFError(f"segmentation file {path}: expected one non-negative integer label per "
+                       f"vertex")
+    lab = lab.astype(np.int64)
+    return lab, tuple(str(i) for i in range(int(lab.max()) + 1))
+
+
+def shape_labels(dataset: Dataset, index: int, template: np.ndarray) -> np.ndarray:
+    """The template labelling on shape ``index`` of ``dataset`` (see the module doc)."""
+    e = dataset.shapes[index]
+    if e.mesh.n_vertices == template.size:
+        return template.copy()
+    folder = e.path.parent
+    sid_path = next((p for p in (folder / "corres" / "sampleID.vts", folder / "sampleID.vts")
+                     if p.is_file()), folder / "corres" / "sampleID.vts")
+    if e.vts is None or not sid_path.is_file():
+        raise BSFError(f"{e.name}: {e.mesh.n_vertices} vertices, not the template's "
+                       f"{template.size}, and no {sid_path} to name template vertices")
+    sid = np.loadtxt(sid_path, dtype=np.int64).ravel() - 1
+    if sid.shape != e.vts.shape or sid.min() < 0 or sid.max() >= template.size:
+        raise BSFError(f"{sid_path}: expected {e.vts.size} template indices in [1, "
+                       f"{template.size}]")
+    out = np.full(e.mesh.n_vertices, -1, np.int64)
+    out[e.vts[::-1]] = template[sid[::-1]]  # a vertex listed twice: the first entry wins
+    named = np.flatnonzero(out >= 0)
+    miss = out < 0
+    if miss.any():
+        nn = scipy.spatial.cKDTree(e.mesh.vertices[named]).query(e.mesh.vertices[miss])[1]
+        out[miss] = out[named[nn]]
+    return out
+
+
+def label_metrics(pred: np.ndarray, truth: np.ndarray, mass: np.ndarray, mesh,
+                  band: float = BAND) -> dict:
+    """Area accuracy, unassigned share, mean / worst IoU over the true parts, and accuracy
+    within ``band`` · √area (Euclidean) of a vertex on a true part border."""
+    mass = np.asarray(mass, float)
+    total = mass.sum()
+    ok = pred == truth
+    parts = np.unique(truth)
+    inter = np.array([mass[(pred == p) & (truth == p)].sum() for p in parts])
+    union = np.array([mass[(pred == p) | (truth == p)].sum() for p in parts])
+    iou = inter / union
+    e, _ = mesh_edges(mesh.faces)
+    diff = truth[e[:, 0]] != truth[e[:, 1]]
+    border = np.unique(e[diff].ravel())
+    if border.size:
+        d = scipy.spatial.cKDTree(mesh.vertices[border]).query(mesh.vertices)[0]
+        near = d <= band * np.sqrt(mesh.area)
+    else:
+        near = np.zeros(truth.shape, bool)
+    return {"accuracy": 100 * float(mass[ok].sum() / total),
+            "unassigned": 100 * float(mass[pred < 0].sum() / total),
+            "iou_mean": float(iou.mean()), "iou_worst": float(iou.min()),
+            "border_accuracy": (100 * float(mass[ok & near].sum() / mass[near].sum())
+                                if near.any() else float("nan"))}
+
+
+def _kind(a: str, b: str) -> str:
+    """FAUST naming (``tr_reg_PQR``: person ``PQ``): same person or not; else ``-``."""
+    try:
+        na, nb = int(a.rsplit("_", 1)[-1]), int(b.rsplit("_", 1)[-1])
+    except ValueError:
+        return "-"
+    return "same person" if na // 10 == nb // 10 else "other person"
+
+
+def _maps(sm, sn, gt, k: int, landmarks) -> dict:
+    """``{map name: (C (k × k), p2p)}`` for the three maps of the module doc."""
+    d = estimate_map(sm.truncate(2 * k), sn.truncate(2 * k), k=k, landmarks=landmarks,
+                     refine_to=2 * k)
+    c = estimate_map(sm.truncate(20), sn.truncate(20), k=20, landmarks=landmarks, refine_to=20)
+    C_gt = np.asarray(fmap_from_p2p(sm.truncate(k), sn.truncate(k), gt))
+    return {"default": (d.C, d.p2p), "crude": (c.C, c.p2p), "truth": (C_gt, gt)}
+
+
+def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k: int = 30,
+                            methods=tuple(METHODS), maps=MAPS, seed: int = 0, cache_dir=None,
+                            pair_list=None, keep_labels: int = 1,
+                            progress: bool = True) -> list[dict]:
+    """Every method × map on ``pairs`` pairs (or the ``(source, target)`` indices of
+    ``pair_list``).
+
+    Arguments:
+        dataset: the ``--data`` folder.
+        segmentation: template segmentation file (:func:`load_segmentation`).
+        pairs, seed: number of pairs drawn by :meth:`Dataset.pairs`.
+        k: basis size of the maps and of the spectral methods (spectra: ``K_SPECTRA``).
+        methods, maps: subsets of :data:`METHODS` and :data:`MAPS`.
+        cache_dir: eigenbasis cache folder.
+        keep_labels: the first ``keep_labels`` pairs keep their per-vertex labels in the rows
+            (keys ``_labels``, ``_truth``, ``_mesh``, not written to the CSV) for the figure.
+        progress: progress bar.
+
+    Returns:
+        Rows ``{"source", "target", "kind", "map", "method", "accuracy", "unassigned",
+        "iou_mean", "iou_worst", "border_accuracy", "seconds", "regime"}``.
+    """
+    template, _ = load_segmentation(segmentation)
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise BSFError(f"methods must be among {tuple(METHODS)}, got {bad}")
+    bad = [m for m in maps if m not in MAPS]
+    if bad:
+        raise BSFError(f"maps must be among {MAPS}, got {bad}")
+    ids = list(pair_list) if pair_list is not None else dataset.pairs(pairs, seed)
+    rows = []
+    for n_pair, (i, j) in enumerate(tqdm(ids, desc="segmentation", disable=not progress)):
+        src, tgt = dataset.shapes[i], dataset.shapes[j]
+        k_spec = min(K_SPECTRA, src.n_vertices - 1, tgt.n_vertices - 1)
+        sm = spectrum(src.mesh, k_spec, cache_dir=cache_dir)
+        sn = spectrum(tgt.mesh, k_spec, cache_dir=cache_dir)
+        lab_m, lab_n = shape_labels(dataset, i, template), shape_labels(dataset, j, template)
+        gt = dataset.ground_truth(i, j)
+        lm_src = np.asarray(farthest_point_sampling(src.mesh, N_LANDMARKS, seed=seed))
+        landmarks = (lm_src, gt_inverse(gt, lm_src, tgt.mesh, src.mesh))
+        all_maps = _maps(sm, sn, gt, k, landmarks)
+        for map_name in maps:
+            C, p2p = all_maps[map_name]
+            for name in methods:
+                t0 = time.perf_counter()
+                method, options = METHODS[name]
+                res = transfer_labels(sm, sn, lab_m, method=method, C=C, p2p=p2p,
+                                      mesh=src.mesh, **options)
+                sec = time.perf_counter() - t0
+                row = {"source": src.name, "target": tgt.name, "kind": _kind(src.name, tgt.name),
+                       "map": map_name, "method": name,
+                       **label_metrics(res.labels, lab_n, np.asarray(sn.mass), tgt.mesh),
+                       "seconds": round(sec, 3), "regime": res.regime or ""}
+                if n_pair < keep_labels:
+                    row.update(_labels=res.labels, _truth=lab_n, _mesh=tgt.mesh)
+                rows.append(row)
+    return rows
+
+
+def gt_inverse(gt: np.ndarray, src_vertices: np.ndarray, target_mesh, source_mesh) -> np.ndarray:
+    """Target vertices matching ``src_vertices`` under the ground truth ``gt`` (target →
+    source): a target vertex mapped to the source vertex, else to its nearest mapped one."""
+    hit = np.full(source_mesh.n_vertices, -1, np.int64)
+    hit[gt[::-1]] = np.arange(gt.size)[::-1]
+    mapped = np.flatnonzero(hit >= 0)
+    nn = scipy.spatial.cKDTree(source_mesh.vertices[mapped]).query(
+        source_mesh.vertices[src_vertices])[1]
+    return hit[mapped[nn]]
+
+
+def run(dataset, *, pairs, functions, ks, seed, cache_dir, progress, segmentation=None):
+    """The registry's uniform call (``functions`` unused; ``ks[0]`` is k)."""
+    if segmentation is None:
+        raise BSFError("reproduce segmentation needs --segmentation FILE (the template's part "
+                       "labels, e.g. ../shared/data/segmentations/smpl_vert_segmentation.json)")
+    return segmentation_experiment(dataset, segmentation=segmentation, pairs=pairs, k=ks[0],
+                                   seed=seed, cache_dir=cache_dir, progress=progress)
+
+
+def report(rows, ks) -> Report:
+    """Mean over pairs per (map, method) and the per-pair table; the figure: the first pair's
+    target coloured by the truth and by each method through the default map."""
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    maps = list(dict.fromkeys(r["map"] for r in rows))
+    summary = []
+    for mp in maps:
+        base = {(r["source"], r["target"]): r["accuracy"] for r in rows
+                if r["map"] == mp and r["method"] == "p2p"}
+        for m in methods:
+            sel = [r for r in rows if r["map"] == mp and r["method"] == m]
+            if not sel:
+                continue
+            gain = [r["accuracy"] - base[(r["source"], r["target"])] for r in sel
+                    if (r["source"], r["target"]) in base]
+            summary.append({"map": mp, "method": m,
+                            "accuracy %": np.mean([r["accuracy"] for r in sel]),
+                            "vs p2p (mean)": np.mean(gain) if gain else float("nan"),
+                            "vs p2p (min)": np.min(gain) if gain else float("nan"),
+                            "unassigned %": np.mean([r["unassigned"] for r in sel]),
+                            "IoU mean": np.mean([r["iou_mean"] for r in sel]),
+                            "IoU worst": np.mean([r["iou_worst"] for r in sel]),
+                            "border %": np.mean([r["border_accuracy"] for r in sel]),
+                            "s": np.median([r["seconds"] for r in sel])})
+    md = ["## Mean over pairs (accuracy: % of the target's area labelled correctly; vs p2p: "
+          "points over the pull-back through the same map)", "", _table(summary), "",
+          "## Accuracy per pair (%)", "",
+          pivot_markdown(rows, index=("map", "method"), columns=("source", "target"),
+                         value="accuracy", fmt="{:.2f}", best="max")]
+    fig_rows = [r for r in rows if "_labels" in r and r["map"] == "default"]
+    figure = (lambda path: _figure(fig_rows, path)) if fig_rows else None
+    return Report("\n".join(md), None, f"k = {ks[0]}, spectra of {K_SPECTRA} eigenpairs, "
+                  f"{N_LANDMARKS} landmarks (FPS + ground-truth images), border band "
+                  f"{BAND}·√area", figure)
+
+
+def _table(summary: list[dict]) -> str:
+    keys = list(summary[0]) if summary else []
+    out = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    for s in summary:
+        out.append("| " + " | ".join(f"{v:.2f}" if isinstance(v, float) else str(v)
+                                     for v in s.values()) + " |")
+    return "\n".join(out)
+
+
+def _figure(rows: list[dict], path) -> Path:
+    """The target coloured by the truth and by each method, side by side (one PNG)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from .._files import atomic_path
+    from ..plot import _label_colour, _Scene
+
+    first = (rows[0]["source"], rows[0]["target"])
+    rows = [r for r in rows if (r["source"], r["target"]) == first]
+    mesh = rows[0]["_mesh"]
+    panels = [("truth", rows[0]["_truth"])] + [(f"{r['method']} {r['accuracy']:.1f} %",
+                                                r["_labels"]) for r in rows]
+    fig = Figure(figsize=(1.7 * len(panels), 2.2), dpi=130)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    scene = _Scene(mesh, ["front"], "y")
+    for ax, (title, lab) in zip(axes, panels):
+        face = np.asarray(lab)[mesh.faces]
+        # a face takes the label of its first vertex unless the other two agree
+        fl = np.where(face[:, 1] == face[:, 2], face[:, 1], face[:, 0])
+        scene.draw(ax, 0, _label_colour(fl), title)
+        ax.title.set_fontsize(7)
+    fig.suptitle(f"{first[0]} → {first[1]}, default map", fontsize=8)
+    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.9, wspace=0.0)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    return path

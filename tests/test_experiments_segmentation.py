@@ -1,0 +1,104 @@
+"""``reproduce segmentation`` (``bsfjax/experiments/segmentation.py``): labels, metrics, run."""
+
+import json
+
+import numpy as np
+import pytest
+
+import bsfjax as bj
+from bsfjax.experiments import reproduce
+from bsfjax.experiments._datasets import load_dataset
+from bsfjax.experiments.segmentation import (label_metrics, load_segmentation, report,
+                                             segmentation_experiment, shape_labels)
+
+from .conftest import data_path
+
+
+def test_load_segmentation_json_first_name_wins(tmp_path):
+    f = tmp_path / "parts.json"
+    f.write_text(json.dumps({"b": [0, 1, 2], "a": [2, 3], "c": [4]}))
+    lab, names = load_segmentation(f)
+    assert names == ("a", "b", "c")
+    np.testing.assert_array_equal(lab, [1, 1, 0, 0, 2])  # vertex 2 in a and b: "a"
+    f.write_text(json.dumps({"a": [0, 2]}))
+    with pytest.raises(bj.BSFError, match="1 vertices are in no part"):
+        load_segmentation(f)
+    g = tmp_path / "labels.txt"
+    np.savetxt(g, [0, 2, 1])
+    lab, names = load_segmentation(g)
+    np.testing.assert_array_equal(lab, [0, 2, 1])
+    assert names == ("0", "1", "2")
+    with pytest.raises(bj.BSFError, match="no such file"):
+        load_segmentation(tmp_path / "missing.json")
+
+
+def test_label_metrics_closed_form():
+    ex = bj.example_pair(levels=1)
+    m = ex.target
+    mass = np.asarray(bj.spectrum(m, 3).mass)
+    truth = ex.labels
+    perfect = label_metrics(truth, truth, mass, m)
+    assert perfect["accuracy"] == pytest.approx(100) and perfect["iou_worst"] == pytest.approx(1)
+    assert perfect["unassigned"] == 0 and perfect["border_accuracy"] == pytest.approx(100)
+    pred = truth.copy()
+    part = truth == truth.max()
+    pred[part] = -1  # one part unassigned
+    r = label_metrics(pred, truth, mass, m)
+    share = mass[part].sum() / mass.sum()
+    assert r["accuracy"] == pytest.approx(100 * (1 - share))
+    assert r["unassigned"] == pytest.approx(100 * share)
+    assert r["iou_worst"] == 0.0
+    n_parts = len(np.unique(truth))
+    assert r["iou_mean"] == pytest.approx((n_parts - 1) / n_parts)
+
+
+def _example_folder(tmp_path):
+    ex = bj.example_pair(levels=2)
+    folder = tmp_path / "data"
+    folder.mkdir()
+    bj.save_mesh(folder / "tr_reg_000.off", ex.source)
+    bj.save_mesh(folder / "tr_reg_001.off", ex.target)
+    seg = tmp_path / "parts.txt"
+    np.savetxt(seg, ex.labels, fmt="%d")
+    return folder, seg
+
+
+def test_run_on_the_example_pair(tmp_path):
+    folder, seg = _example_folder(tmp_path)
+    ds = load_dataset(folder)
+    rows = segmentation_experiment(ds, segmentation=seg, pairs=1, k=20,
+                                   methods=("p2p", "refined", "std"), progress=False,
+                                   cache_dir=tmp_path / "cache")
+    assert len(rows) == 3 * 3
+    by = {(r["map"], r["method"]): r for r in rows}
+    assert by[("truth", "p2p")]["accuracy"] == pytest.approx(100)
+    assert by[("crude", "refined")]["accuracy"] >= by[("crude", "p2p")]["accuracy"] - 1
+    assert all(r["unassigned"] == 0 for r in rows if r["method"] != "std")
+    assert {r["regime"] for r in rows if r["method"] == "refined"} <= set(bj._highlevel.REGIMES)
+    rep = report(rows, (20,))
+    assert "| default | refined |" in rep.markdown
+    png = rep.figure(tmp_path / "seg.png")
+    assert png.stat().st_size > 1000
+
+
+def test_reproduce_needs_the_segmentation(tmp_path):
+    folder, _ = _example_folder(tmp_path)
+    with pytest.raises(bj.BSFError, match="--segmentation"):
+        reproduce("segmentation", folder, tmp_path / "out", pairs=1, progress=False)
+    with pytest.raises(bj.BSFError, match="takes no segmentation"):
+        reproduce("table3", folder, tmp_path / "out", pairs=1, progress=False,
+                  segmentation="x.json")
+
+
+@pytest.mark.skipif(not data_path("faust_5k").exists(), reason="../shared/data/faust_5k absent")
+def test_remeshed_labels_follow_the_template():
+    """FAUST_5k: a vertex named by the ``.vts`` list has its template vertex's label."""
+    ds = load_dataset(data_path("faust_5k"))
+    seg = data_path("segmentations", "smpl_vert_segmentation.json")
+    template, _ = load_segmentation(seg)
+    lab = shape_labels(ds, 0, template)
+    e = ds.shapes[0]
+    sid = np.loadtxt(data_path("faust_5k", "corres", "sampleID.vts"), dtype=int) - 1
+    first = np.unique(e.vts, return_index=True)[1]
+    np.testing.assert_array_equal(lab[e.vts[first]], template[sid[first]])
+    assert lab.shape == (e.n_vertices,) and lab.min() >= 0
