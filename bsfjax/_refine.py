@@ -19,9 +19,11 @@ embedding but may slide along regions with little spectral detail (a torso); the
 term ties the point map to the local geometry.  :class:`bsfjax.RefinedPullBack` pulls
 functions back through the last ``n_keep`` point maps and averages them (a vote for labels).
 
-Measured (``docs/results.md``, "Real segmentations"): +0.6 points of SMPL part accuracy over
-the pull-back of the CLI's estimated map on average on 9 FAUST / FAUST_5k pairs (+0.0 … +1.3),
-+4.5 with a crude k = 20 map; the continuation without the descriptor term gave +0.3 and +4.2.
+Measured (``docs/results.md``, "Real segmentations"; SMPL parts, 9 FAUST / FAUST_5k pairs):
++0.48 points of area accuracy over the pull-back of the CLI's estimated map on average
+(+0.14 … +0.84), +3.9 with a crude k = 20 map.  Steps of 10 instead of 20 gave +0.62 / +4.5 for
+5 nearest-neighbour searches instead of 3; without the descriptor term, +0.27 / +4.2.  From an
+exact map it loses 1–5 points: the continuation's fixed point is not the registration.
 """
 
 from __future__ import annotations

@@ -305,9 +305,13 @@ def _figure(rows: list[dict], path) -> Path:
     mesh = rows[0]["_mesh"]
     panels = [("truth", rows[0]["_truth"])] + [(f"{r['method']} {r['accuracy']:.1f} %",
                                                 r["_labels"]) for r in rows]
-    fig = Figure(figsize=(1.7 * len(panels), 2.2), dpi=130)
+    ncols = min(len(panels), 6)
+    nrows = -(-len(panels) // ncols)
+    fig = Figure(figsize=(1.7 * ncols, 2.2 * nrows), dpi=130)
     FigureCanvasAgg(fig)
-    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax in axes[len(panels):]:
+        ax.set_axis_off()
     scene = _Scene(mesh, ["front"], "y")
     for ax, (title, lab) in zip(axes, panels):
         face = np.asarray(lab)[mesh.faces]
@@ -316,7 +320,8 @@ def _figure(rows: list[dict], path) -> Path:
         scene.draw(ax, 0, _label_colour(fl), title)
         ax.title.set_fontsize(7)
     fig.suptitle(f"{first[0]} → {first[1]}, default map", fontsize=8)
-    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.9, wspace=0.0)
+    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=1 - 0.1 / nrows, wspace=0.0,
+                        hspace=0.12)
     path = Path(path)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
