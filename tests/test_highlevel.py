@@ -50,3 +50,33 @@ def test_transfer_values_errors(small_pair):
         estimate_map(sm, sn, k=10, landmarks=([1, 2], [3]))
     with pytest.raises(ValueError, match="landmarks must be vertex indices"):
         estimate_map(sm, sn, k=10, landmarks=([1, 10**6], [3, 4]))
+
+
+def test_estimate_map_without_landmarks_uses_the_orientation_term(small_pair):
+    """No landmarks: with the meshes the orientation term tells left from right (the example
+    body's arms and legs are separate parts), and it changes the estimate."""
+    pair, sm, sn = small_pair
+    gt = np.asarray(pair.p2p)
+    mass = np.asarray(sn.mass)
+    plain = estimate_map(sm, sn, k=20, refine_to=40)
+    oriented = estimate_map(sm, sn, k=20, refine_to=40, source_mesh=pair.source,
+                            target_mesh=pair.target)
+    assert not np.allclose(plain.C_initial, oriented.C_initial)
+    acc = np.sum(mass * (pair.labels[oriented.p2p] == pair.labels[gt])) / mass.sum()
+    assert acc > 0.95
+    with_lm = estimate_map(sm, sn, k=20, refine_to=40, landmarks=([0], [0]),
+                           source_mesh=pair.source, target_mesh=pair.target)
+    ref = estimate_map(sm, sn, k=20, refine_to=40, landmarks=([0], [0]))
+    np.testing.assert_array_equal(with_lm.C, ref.C)  # with landmarks the meshes are unused
+
+
+def test_transfer_labels_refined_default_reports_its_regime(small_pair):
+    pair, sm, sn = small_pair
+    gt = np.asarray(pair.p2p)
+    res = transfer_labels(sm, sn, pair.labels, p2p=gt)  # default method: "refined"
+    assert res.regime in bsfjax._highlevel.REGIMES and res.unassigned_share == 0.0
+    assert 0.9 < res.confidence <= 1.0 + 1e-6
+    mass = np.asarray(sn.mass)
+    assert res.agreement == pytest.approx(np.sum(mass * (res.labels == pair.labels)) / mass.sum())
+    assert res.agreement > 0.95
+    assert transfer_labels(sm, sn, pair.labels, p2p=gt, method="p2p").regime is None
