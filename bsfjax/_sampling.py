@@ -241,7 +241,13 @@ def farthest_point_sampling(mesh, n, metric: str = "euclidean", seed: int = 0,
         return _fps_geodesic(edge_graph(mesh), first, count)
     if metric == "biharmonic":
         points = _biharmonic_embedding(spectrum, n_points)
-    elif n_points >= PRUNED_FPS_MIN_POINTS and count > 1:
+    # translation and scale do not change the samples: unit scale in float64 before the
+    # float32 cast (coordinates of 1e20 would square to inf, of 1e-20 to 0)
+    points = np.asarray(points, np.float64)
+    points = points - points.mean(axis=0)
+    extent = float(np.max(np.abs(points))) if points.size else 0.0
+    points = points / extent if extent > 0 else points
+    if metric != "biharmonic" and n_points >= PRUNED_FPS_MIN_POINTS and count > 1:
         return _fps_pruned(points, first, count)
     idx = _fps_points_jit(jnp.asarray(points), jnp.int32(first), count)
     return np.asarray(idx, dtype=np.int64)

@@ -26,7 +26,8 @@ from ._errors import BSFError, MeshError
 from ._laplacian import MASS_TYPES, laplacian
 from ._mesh import Mesh, n_components
 
-__all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum", "stack_spectra"]
+__all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum", "stack_spectra",
+           "unit_area", "map_to_unit_area"]
 
 #: Below this many vertices the generalized eigenproblem is solved densely (LAPACK).
 DENSE_LIMIT = 600
@@ -260,10 +261,10 @@ def spectrum(mesh: Mesh, k: int, *, mass: str = "mixed", robust: bool = False,
     result = spectrum_from_operators(W, A, k)
     if path is not None:
         try:
-            with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            with atomic_path(path, immediate=True) as tmp, open(tmp, "wb") as fh:
                 np.savez(fh, evals=result.evals, evecs=result.evecs, mass=result.mass,
                          checksum=np.array(_checksum(result.evals, result.evecs, result.mass)))
-        except OSError as exc:  # a full disk or read-only cache must not lose the result
+        except (OSError, BSFError) as exc:  # a full disk or read-only cache must not lose the result
             warnings.warn(f"could not write spectrum cache file {path} ({exc}); continuing "
                           "without caching it", stacklevel=2)
     return result
@@ -312,3 +313,43 @@ def stack_spectra(spectra) -> Spectrum:
     if len(shapes) != 1:
         raise BSFError(f"spectra to stack must share (n_vertices, k); got {sorted(shapes)}")
     return jax.tree.map(lambda *x: np.stack(x), *spectra)
+
+
+def unit_area(spec: Spectrum):
+    """``(spectrum of the shape rescaled to unit area, area)``, computed on the host in float64.
+
+    ``λ ↦ λ·S``, ``Φ ↦ Φ·√S``, ``A ↦ A/S`` with ``S = Σ A`` (per shape of a stack), so the
+    stages after the spectrum, which cast to float32 by default, see unit-scale numbers: a mesh
+    in units of 1e-20 or 1e20 (areas 1e±40, beyond float32) works like one in metres.  A map
+    ``C`` between the original bases is ``C' = C·√(S_M/S_N)`` between the unit-area ones; a
+    function's values do not change.  Returns ``(spec, None)`` for traced arrays (no change).
+    """
+    import jax
+
+    if any(isinstance(x, jax.core.Tracer) for x in (spec.evals, spec.evecs, spec.mass)):
+        return spec, None
+    mass = np.asarray(spec.mass, np.float64)
+    area = mass.sum(axis=-1)
+    if not np.all(np.isfinite(area)) or not np.all(area > 0):
+        return spec, None  # nothing to normalize by (the Spectrum check reports bad areas)
+    a = np.asarray(area)
+    out = Spectrum(np.asarray(spec.evals, np.float64) * a[..., None],
+                   np.asarray(spec.evecs, np.float64) * np.sqrt(a)[..., None, None],
+                   mass / a[..., None])
+    return out, a
+
+
+def map_to_unit_area(C, area_source, area_target, inverse: bool = False):
+    """``C·√(S_M/S_N)`` (a map between original bases → between unit-area bases), or the
+    inverse; ``C`` unchanged when an area is ``None`` (traced)."""
+    if C is None or area_source is None or area_target is None:
+        return C
+    r = np.sqrt(np.asarray(area_source, np.float64) / np.asarray(area_target, np.float64))
+    r = 1.0 / r if inverse else r
+    if np.ndim(r):
+        r = r[..., None, None]
+    if isinstance(C, np.ndarray):
+        return np.asarray(C, np.float64) * r
+    import jax.numpy as jnp
+
+    return C * jnp.asarray(r, jnp.result_type(C))
