@@ -369,6 +369,12 @@ def _check_options(args) -> None:
     cmd = args.command
     if cmd == "transfer":
         kind_file = args.map[1] if len(args.map) > 1 else None
+        for opt, path in (("source", args.source), ("target", args.target),
+                          ("--labels", args.labels), ("--function", args.function),
+                          ("--map", kind_file), ("--truth", args.truth)):
+            if path is not None and not Path(path).is_file():  # before the meshes are read
+                raise CLIError(f"{opt} {path}: " + ("is a folder" if Path(path).is_dir()
+                                                     else "no such file"))
         check_outputs({"--out": args.out, "--mesh-out": args.mesh_out},
                       {"source": args.source, "target": args.target, "--labels": args.labels,
                        "--function": args.function, "--map": kind_file,
