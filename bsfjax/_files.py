@@ -49,6 +49,11 @@ def _no_sigint() -> Iterator[None]:
 
 def _cannot_write(dest: Path, exc: OSError) -> BSFError:
     # the user's path and the reason, never the temporary file's name
+    anc = dest.parent
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    if anc.exists() and not anc.is_dir():  # mkdir says "File exists", which misleads
+        return BSFError(f"{dest}: cannot write ({anc} is not a folder)")
     return BSFError(f"{dest}: cannot write ({exc.strerror or type(exc).__name__})")
 
 

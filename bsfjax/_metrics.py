@@ -120,4 +120,5 @@ def relative_error(reference, estimate, mass) -> jax.Array:
     f, e, w = f / s[..., None], e / s[..., None], w / ws[..., None]
     out = _relative_error(jnp.asarray(f, dt), jnp.asarray(e, dt), jnp.asarray(w, dt))
     zero = np.sum(w * f * f, axis=-1) == 0  # the absolute-error rule: restore its units
-    return jnp.where(zero, out * jnp.asarray(s * np.sqrt(ws), dt), out)
+    unit = np.minimum(np.where(zero, s * np.sqrt(ws), 1.0), np.finfo(dt).max)
+    return out * jnp.asarray(unit, dt)

@@ -48,6 +48,19 @@ def _on_sigint(signum, frame) -> None:  # pragma: no cover - runs in a subproces
     os._exit(EXIT_INTERRUPTED)
 
 
+def exit_now(status: int) -> None:  # pragma: no cover - ends the process
+    """End the command with ``status`` without finalizing the interpreter: a SIGINT during the
+    finalization would meet the default handler again (status -2), and XLA's threads torn
+    down under a finalizing interpreter can segfault.  The outputs are already committed."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # the end is decided
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except BaseException:
+            pass
+    os._exit(int(status))
+
+
 def install() -> bool:
     """Install the command's SIGINT handler (only in the ``bsfjax`` command's own process, and
     only from the main thread); returns whether it is installed."""

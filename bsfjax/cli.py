@@ -116,7 +116,7 @@ def _read_array(path: str, what: str, dtype=None):
         bad = ~np.isfinite(arr) | (np.mod(arr, 1) != 0) | (np.abs(arr) >= 2.0**63)
         if bad.any():  # the value as read, not as a wrapped-around int64
             i = int(np.argmax(bad.reshape(-1)))
-            raise CLIError(f"{what} file {p}: expected integers, found {arr.reshape(-1)[i]!r} "
+            raise CLIError(f"{what} file {p}: expected integers, found {arr.reshape(-1)[i].item()!r} "
                            f"(entry {i})")
         arr = arr.astype(np.int64)
     return arr
@@ -209,16 +209,20 @@ def _cmd_transfer(args) -> int:
         if C.ndim != 2 or C.shape[0] != C.shape[1]:
             raise CLIError(f"fmap file {rest[0]}: expected a square k x k matrix, got shape {C.shape}")
         k = k_spec = C.shape[0]
-    sm, sn = spectrum(source, k_spec), spectrum(target, k_spec)
-    print(f"spectra: {source.n_vertices} and {target.n_vertices} vertices, k = {k_spec}", file=sys.stderr)
-    if kind == "p2p":
+    if kind == "p2p":  # read and checked before the spectra, so a bad file costs nothing
         p2p = _read_array(rest[0], "p2p", dtype=int)
         if p2p.shape != (target.n_vertices,):
             raise CLIError(f"p2p file {rest[0]}: expected {target.n_vertices} source vertex indices in "
                            f"[0, {source.n_vertices}), got shape {p2p.shape}")
         from ._validate import check_indices
 
-        p2p = check_indices(p2p, f"p2p file {rest[0]}:", source.n_vertices)
+        try:
+            p2p = check_indices(p2p, "p2p", source.n_vertices, what="source vertex indices")
+        except ValueError as exc:
+            raise CLIError(f"p2p file {rest[0]}: {exc}") from None
+    sm, sn = spectrum(source, k_spec), spectrum(target, k_spec)
+    print(f"spectra: {source.n_vertices} and {target.n_vertices} vertices, k = {k_spec}", file=sys.stderr)
+    if kind == "p2p":
         from ._fmap import fmap_from_p2p
 
         C = np.asarray(fmap_from_p2p(sm, sn, p2p))
@@ -391,7 +395,18 @@ def _check_options(args) -> None:
 def main(argv: list[str] | None = None) -> int:
     from . import _signals
 
-    _signals.install()  # Ctrl-C: one line, exit 130, temporaries removed (the command only)
+    if not _signals.install():  # Ctrl-C: one line, exit 130, temporaries removed
+        return _main(argv)  # (only in the command's own process, not when called from Python)
+    try:
+        status = _main(argv)
+    except SystemExit as exc:  # argparse: --help, --version, usage errors
+        if isinstance(exc.code, str):
+            print(exc.code, file=sys.stderr)
+        status = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    _signals.exit_now(status)  # no interpreter finalization (see _signals)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(_join_option_values(sys.argv[1:] if argv is None else argv))
     if getattr(args, "func", None) is None:
