@@ -253,7 +253,10 @@ def fmap_to_p2p(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *,
     chunk = _chunk_for(source_spectrum.n_vertices, target_spectrum.n_vertices, chunk_size)
     sm, am = unit_area(source_spectrum)  # unit scale before the float32 cast (see fmap_from_p2p)
     sn, an = unit_area(target_spectrum)
-    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an)
+    # nearest neighbours are invariant to one common factor: Φ_N vs Φ_M Cᵀ both times √S_N
+    # (C·√(S_N/S_M) with the unit-area Φ_M), Φ_N C vs Φ_M both times √S_M (adjoint)
+    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an,
+                         inverse=not adjoint)
     return _fmap_to_p2p_jit(C, sm.evecs[:, :km], sn.evecs[:, :kn],
                             chunk=chunk, adjoint=bool(adjoint))
 

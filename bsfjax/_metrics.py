@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._errors import BSFError
+from ._validate import pow2_scale
 
 __all__ = ["relative_error"]
 
@@ -113,10 +114,8 @@ def relative_error(reference, estimate, mass) -> jax.Array:
     dt = jax.dtypes.canonicalize_dtype(np.result_type(reference.dtype, estimate.dtype,
                                                       mass.dtype, np.float32))
     f, e, w = (np.asarray(x, np.float64) for x in (reference, estimate, mass))
-    s = np.maximum(np.max(np.abs(f), axis=-1), np.max(np.abs(e), axis=-1))
-    s = np.where(s > 0, s, 1.0)
-    ws = np.max(w, axis=-1)
-    ws = np.where(ws > 0, ws, 1.0)
+    s = pow2_scale(np.maximum(np.max(np.abs(f), axis=-1), np.max(np.abs(e), axis=-1)))
+    ws = pow2_scale(np.max(w, axis=-1), even=True)  # exact rescalings (powers of 2 and 4)
     f, e, w = f / s[..., None], e / s[..., None], w / ws[..., None]
     out = _relative_error(jnp.asarray(f, dt), jnp.asarray(e, dt), jnp.asarray(w, dt))
     zero = np.sum(w * f * f, axis=-1) == 0  # the absolute-error rule: restore its units

@@ -318,7 +318,8 @@ def stack_spectra(spectra) -> Spectrum:
 def unit_area(spec: Spectrum):
     """``(spectrum of the shape rescaled to unit area, area)``, computed on the host in float64.
 
-    ``λ ↦ λ·S``, ``Φ ↦ Φ·√S``, ``A ↦ A/S`` with ``S = Σ A`` (per shape of a stack), so the
+    ``λ ↦ λ·S``, ``Φ ↦ Φ·√S``, ``A ↦ A/S`` with ``S ≈ Σ A`` (the nearest power of 4; per
+    shape of a stack), so the
     stages after the spectrum, which cast to float32 by default, see unit-scale numbers: a mesh
     in units of 1e-20 or 1e20 (areas 1e±40, beyond float32) works like one in metres.  A map
     ``C`` between the original bases is ``C' = C·√(S_M/S_N)`` between the unit-area ones; a
@@ -328,11 +329,15 @@ def unit_area(spec: Spectrum):
 
     if any(isinstance(x, jax.core.Tracer) for x in (spec.evals, spec.evecs, spec.mass)):
         return spec, None
+    from ._validate import pow2_scale
+
     mass = np.asarray(spec.mass, np.float64)
     area = mass.sum(axis=-1)
     if not np.all(np.isfinite(area)) or not np.all(area > 0):
         return spec, None  # nothing to normalize by (the Spectrum check reports bad areas)
-    a = np.asarray(area)
+    # S rounded to a power of 4: the rescaling (and √S) is exact, so a mesh of ordinary size
+    # gives bit-identical results, and the areas end up in [0.5, 2]
+    a = np.asarray(pow2_scale(area, even=True))
     out = Spectrum(np.asarray(spec.evals, np.float64) * a[..., None],
                    np.asarray(spec.evecs, np.float64) * np.sqrt(a)[..., None, None],
                    mass / a[..., None])

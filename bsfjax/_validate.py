@@ -15,7 +15,8 @@ import numpy as np
 from ._errors import BSFError
 
 __all__ = ["is_traced", "check_finite", "check_real", "check_int", "magnitude_limit",
-           "check_indices", "compact_labels", "check_source_mesh", "unit_scale", "restore_scale"]
+           "check_indices", "compact_labels", "check_source_mesh", "unit_scale", "restore_scale",
+           "pow2_scale"]
 
 
 def is_traced(x) -> bool:
@@ -143,7 +144,8 @@ def check_source_mesh(mesh, n_vertices: int, mass, name: str = "mesh") -> None:
 
 
 def unit_scale(f, dtype):
-    """``(f / s, s)``: each function (last axis) divided by its largest magnitude ``s``, on the
+    """``(f / s, s)``: each function (last axis) divided by its largest magnitude ``s`` (rounded
+    up to a power of two, see :func:`pow2_scale`), on the
     host in float64 *before* the cast to ``dtype``, so that values of any magnitude (1e-30 or
     1e30 in float32) reach the kernels at unit scale: squares neither overflow nor underflow,
     and every method, being homogeneous of degree 1 in ``f``, gives ``s ·`` (its unit-scale
@@ -156,9 +158,21 @@ def unit_scale(f, dtype):
     f64 = np.asarray(f, np.float64)
     if f64.ndim == 0 or f64.size == 0:
         return jnp.asarray(f64, dtype), None
-    s = np.max(np.abs(f64), axis=-1)
-    s = np.where(s > 0, s, 1.0)
+    s = pow2_scale(np.max(np.abs(f64), axis=-1))
     return jnp.asarray(f64 / s[..., None], dtype), s
+
+
+def pow2_scale(x, *, even: bool = False) -> np.ndarray:
+    """The power of two nearest above ``x`` (``x`` > 0; 1 where ``x`` is 0), or with ``even`` the
+    nearest power of four.  Dividing by a power of two is exact in floating point, so rescaled
+    inputs of ordinary magnitude give bit-identical results to unrescaled ones."""
+    x = np.asarray(x, np.float64)
+    pos = x > 0
+    if even:
+        e = 2 * np.round(np.log2(np.where(pos, x, 1.0)) / 2).astype(np.int64)
+    else:
+        e = np.frexp(np.where(pos, x, 1.0))[1].astype(np.int64)
+    return np.where(pos, np.ldexp(1.0, e), 1.0)
 
 
 def restore_scale(x, s):
