@@ -28,8 +28,10 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data"
+#: The code under test: this checkout, or BSFJAX_ROOT (e.g. a `git archive` snapshot, so that
+#: editing the checkout during a long run does not change the code being interrupted).
+ROOT = Path(os.environ.get("BSFJAX_ROOT", Path(__file__).resolve().parents[1]))
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 if not DATA.exists():
     DATA = Path("/work/shared/data")
 
@@ -98,7 +100,7 @@ def main() -> None:
             rc, err, _ = _run(args, work / f"run{i:03d}", delay)
             codes[rc] += 1
             if "Traceback" in err:
-                tracebacks.append((i, delay))
+                tracebacks.append((i, delay, err.strip().splitlines()[-3:]))
             if rc < 0:
                 signals.append((i, delay, rc))
             wrong = _check_folder(work / f"run{i:03d}", rc)
@@ -108,6 +110,8 @@ def main() -> None:
                 extra_lines.append((i, delay, err.strip().splitlines()[-1:]))
             print(f"run {i:3d}: SIGINT at {delay:5.2f} s -> status {rc}"
                   + (f"  !! {wrong}" if wrong else ""), flush=True)
+            if rc not in (0, 130) or wrong or "Traceback" in err:
+                print("    stderr: " + " | ".join(err.strip().splitlines()[-4:]), flush=True)
         print("\n| runs | exit status (count) | tracebacks | killed by a signal | bad folders "
               "| last stderr line not 'bsfjax: interrupted' |")
         print("|---|---|---|---|---|---|")

@@ -35,7 +35,7 @@ from ._lasso import Lasso
 from ._lstsq import LeastSquares
 from ._omp import OMP, ErrorOMP
 from ._operator import AbstractFrame
-from ._validate import check_finite, is_traced, magnitude_limit, restore_scale, unit_scale
+from ._validate import check_finite, is_traced, magnitude_limit, restore_scale, unit_scale, homogeneous
 
 __all__ = ["CodingInfo", "encode", "decode", "CODERS", "as_coder"]
 
@@ -208,9 +208,9 @@ def encode(frame: AbstractFrame | Float[Array, "n q"], f: Float[Array, "*batch n
     lead = tuple(f.shape[:-1])
     w = _resolve_weights(coder.weights, frame.mass, n)
     dtype = _float_dtype(f.dtype, frame.dtype)
-    # every coder is homogeneous in f (Lasso's λ is relative): code f / max|f| and scale the
-    # codes back, so 1e-30 or 1e30 in float32 code like 1 (a warm start fixes the scale)
-    unit, scale = (unit_scale(f, dtype) if getattr(coder, "init", None) is None
+    # coders are homogeneous in f (Lasso's λ is relative): code f / max|f| and scale the codes
+    # back, so 1e-30 or 1e30 in float32 code like 1 (not with an absolute eps or a warm start)
+    unit, scale = (unit_scale(f, dtype) if homogeneous(coder)
                    else (jnp.asarray(f, dtype), None))
     _check_magnitude(f if scale is None else unit, w, n, dtype)
     m = int(np.prod(lead, dtype=np.int64))

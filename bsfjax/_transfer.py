@@ -22,7 +22,7 @@ from jaxtyping import Array, ArrayLike, Float
 from ._devices import pad_leading, shard_leading
 from ._errors import BSFError
 from ._operator import DENSE_BUDGET_BYTES
-from ._validate import check_finite, restore_scale, unit_scale
+from ._validate import check_finite, homogeneous, restore_scale, unit_scale
 from ._methods import AbstractMethod, Pair, as_method, method_name
 from ._spectrum import Spectrum, map_to_unit_area, unit_area
 
@@ -156,7 +156,8 @@ def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pai
                        f"n_M = {n_m}, got {f_shape}")
     check_finite(f, "f")
     dtype = jax.dtypes.canonicalize_dtype(jnp.float64)
-    F, scale = unit_scale(f, dtype)  # per function, in float64 before the cast (issue 18)
+    # per function, in float64 before the cast (issue 18); not for an absolute coder eps
+    F, scale = unit_scale(f, dtype) if homogeneous(method) else (jnp.asarray(f, dtype), None)
     pair = _unit_area_pair(method, pair)
     pair = jax.tree.map(lambda x: jnp.asarray(x, dtype)
                         if np.issubdtype(np.asarray(x).dtype, np.floating) else jnp.asarray(x),

@@ -16,7 +16,7 @@ from ._errors import BSFError
 
 __all__ = ["is_traced", "check_finite", "check_real", "check_int", "magnitude_limit",
            "check_indices", "compact_labels", "check_source_mesh", "unit_scale", "restore_scale",
-           "pow2_scale"]
+           "pow2_scale", "homogeneous"]
 
 
 def is_traced(x) -> bool:
@@ -173,6 +173,17 @@ def pow2_scale(x, *, even: bool = False) -> np.ndarray:
     else:
         e = np.frexp(np.where(pos, x, 1.0))[1].astype(np.int64)
     return np.where(pos, np.ldexp(1.0, e), 1.0)
+
+
+def homogeneous(obj) -> bool:
+    """Whether a coder (or a method with a ``coder``) gives ``s·α`` for ``s·f``: not with an
+    absolute residual bound (``ErrorOMP(eps=…)``, ``eps="spams"``) or a warm start (``init``),
+    which fix a scale; then :func:`unit_scale` is skipped."""
+    for o in (obj, getattr(obj, "coder", None)):
+        if o is not None and (getattr(o, "eps", None) is not None
+                              or getattr(o, "init", None) is not None):
+            return False
+    return True
 
 
 def restore_scale(x, s):
