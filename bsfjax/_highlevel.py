@@ -164,9 +164,10 @@ def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, "
                     threshold: float = 0.5, **kwargs) -> LabelTransfer:
     """Transfer a segmentation: one step function per label, then arg-max on the target.
 
-    ``labels`` ``(n_M,)`` non-negative ints (any values: they are compacted to the ``L`` labels
-    present first, so ``scores`` row ``i`` is the ``i``-th smallest label).  Each label's indicator is transferred with
-    :func:`transfer_values` (``**kwargs``: ``C``, ``p2p``, ``method``, …); a target vertex takes
+    ``labels`` ``(n_M,)`` non-negative ints of any size: they are compacted to the ``L`` labels
+    present first, so ``scores`` row ``i`` is the ``i``-th smallest label.  Each label's
+    indicator is transferred with :func:`transfer_values` (``**kwargs``: ``C``, ``p2p``,
+    ``method``, …); a target vertex takes
     the label with the largest transferred value, or −1 ("unassigned") when that value is below
     ``threshold`` (the midpoint of an indicator's two values by default).
     """
