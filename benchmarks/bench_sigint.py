@@ -85,6 +85,9 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
+    # a benchmark started in the background (nohup … &) inherits SIGINT ignored, and so would
+    # every child (an ignored signal stays ignored across exec): give them the default
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     rng = random.Random(a.seed)
     with tempfile.TemporaryDirectory(prefix="bench_sigint_") as tmp:
         work = Path(tmp)

@@ -63,11 +63,16 @@ def exit_now(status: int) -> None:  # pragma: no cover - ends the process
 
 def install() -> bool:
     """Install the command's SIGINT handler (only in the ``bsfjax`` command's own process, and
-    only from the main thread); returns whether it is installed."""
+    only from the main thread); returns whether this is the command's process.
+
+    An inherited ``SIG_IGN`` (``nohup bsfjax … &``, a background job of a script) is kept, as
+    Python itself keeps it: such a job is not meant to be stopped by the terminal's Ctrl-C.
+    """
     if not is_cli_process():
         return False
     try:
-        signal.signal(signal.SIGINT, _on_sigint)
+        if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+            signal.signal(signal.SIGINT, _on_sigint)
     except ValueError:  # not the main thread
         return False
     return True
