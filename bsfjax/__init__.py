@@ -19,6 +19,12 @@ owns each step, see ``docs/architecture.md``)::
     experiments bsfjax.experiments (the paper's tables and figures), bsfjax.plot, bsfjax.cli
 """
 
+# the ``bsfjax`` command handles Ctrl-C from here on, before the heavy imports below (a no-op
+# when bsfjax is imported as a library; see _signals)
+from . import _signals
+
+_signals.install()
+
 from importlib.metadata import PackageNotFoundError, version as _version
 
 from ._errors import BSFError, MeshError

@@ -161,7 +161,10 @@ def _auto_energies(evals, n_energies: int, variance: float):
     _, lam_min = _nonzero(evals)
     e_min = jnp.log(lam_min)
     e_max = jnp.log(jnp.max(evals, axis=-1))
-    sigma = variance * (e_max - e_min) / n_energies
+    # a single distinct non-zero eigenvalue (k = 2, or a degenerate spectrum) has no energy
+    # range: one e-fold instead, never σ = 0 (0/0 in the weights)
+    span = jnp.where(e_max > e_min, e_max - e_min, 1.0)
+    sigma = variance * span / n_energies
     frac = jnp.linspace(0.0, 1.0, n_energies)
     lo, hi = e_min + 2 * sigma, e_max - 2 * sigma
     return lo[..., None] + (hi - lo)[..., None] * frac, sigma

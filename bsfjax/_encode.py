@@ -35,7 +35,7 @@ from ._lasso import Lasso
 from ._lstsq import LeastSquares
 from ._omp import OMP, ErrorOMP
 from ._operator import AbstractFrame
-from ._validate import check_finite, is_traced, magnitude_limit
+from ._validate import check_finite, is_traced, magnitude_limit, restore_scale, unit_scale, homogeneous
 
 __all__ = ["CodingInfo", "encode", "decode", "CODERS", "as_coder"]
 
@@ -208,7 +208,11 @@ def encode(frame: AbstractFrame | Float[Array, "n q"], f: Float[Array, "*batch n
     lead = tuple(f.shape[:-1])
     w = _resolve_weights(coder.weights, frame.mass, n)
     dtype = _float_dtype(f.dtype, frame.dtype)
-    _check_magnitude(f, w, n, dtype)
+    # coders are homogeneous in f (Lasso's λ is relative): code f / max|f| and scale the codes
+    # back, so 1e-30 or 1e30 in float32 code like 1 (not with an absolute eps or a warm start)
+    unit, scale = (unit_scale(f, dtype) if homogeneous(coder)
+                   else (jnp.asarray(f, dtype), None))
+    _check_magnitude(f if scale is None else unit, w, n, dtype)
     m = int(np.prod(lead, dtype=np.int64))
     source = coder._host_source(frame, w, m)
     static, rep, per = coder._options(frame, w, lead, m, dtype, host=source is not None)
@@ -217,7 +221,7 @@ def encode(frame: AbstractFrame | Float[Array, "n q"], f: Float[Array, "*batch n
         info = CodingInfo(jnp.zeros(lead, jnp.int32), jnp.zeros(lead, dtype),
                           jnp.ones(lead, bool))
         return (alpha, info) if return_info else alpha
-    F = jnp.reshape(jnp.asarray(f, dtype), (m, n))
+    F = jnp.reshape(unit, (m, n))
     wv = None if w is None else jnp.asarray(w, dtype)
     token = None
     if source is not None:
@@ -233,10 +237,13 @@ def encode(frame: AbstractFrame | Float[Array, "n q"], f: Float[Array, "*batch n
             HostGramRows.release(token)
             if hasattr(source, "release"):
                 source.release()
-    alpha = jnp.reshape(alpha, lead + (q,))
+    alpha = restore_scale(jnp.reshape(alpha, lead + (q,)), scale)
     if not return_info:
         return alpha
-    return alpha, jax.tree.map(lambda x: jnp.reshape(x, lead), info)
+    info = jax.tree.map(lambda x: jnp.reshape(x, lead), info)
+    if scale is not None:
+        info = info._replace(residual=info.residual * jnp.asarray(scale, info.residual.dtype))
+    return alpha, info
 
 
 def decode(frame: AbstractFrame | Float[Array, "n q"],
@@ -259,8 +266,18 @@ def decode(frame: AbstractFrame | Float[Array, "n q"],
     check_finite(alpha, "alpha")
     dtype = _float_dtype(alpha.dtype, frame.dtype)
     lead = tuple(alpha.shape[:-1])
-    A = jnp.reshape(jnp.asarray(alpha, dtype), (-1, q))
-    return jnp.reshape(_decode(_cast(frame, dtype), A), lead + (frame.n_vertices,))
+    unit, scale = unit_scale(alpha, dtype)  # Bα is linear: decode at unit scale, scale back
+    out = _decode(_cast(frame, dtype), jnp.reshape(unit, (-1, q)))
+    if scale is not None and out.size:
+        # the largest |f_v| the codes reach, in float64 before the cast back to dtype
+        big = np.max(np.abs(np.asarray(out, np.float64)), axis=-1) * scale.reshape(-1)
+        if not np.all(big <= np.finfo(dtype).max):
+            raise BSFError(f"alpha decodes to values up to {float(np.max(big)):.3g}, beyond "
+                           f"the {np.dtype(dtype).name} range (max "
+                           f"{float(np.finfo(dtype).max):.3g}): rescale alpha or enable "
+                           "jax_enable_x64")
+        out = out * jnp.asarray(scale.reshape(-1), dtype)[:, None]
+    return jnp.reshape(out, lead + (frame.n_vertices,))
 
 
 @jax.jit

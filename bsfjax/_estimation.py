@@ -453,6 +453,9 @@ def _prepare(source_spectrum, target_spectrum, source_descr, target_descr, k):
                            f"spectrum), got {np.shape(d)}")
         if not np.issubdtype(d.dtype, np.number) or not np.all(np.isfinite(d)):
             raise BSFError(f"{name} must be finite numbers (found NaN/inf or a non-numeric dtype)")
+        if d.shape[-1] == 0:  # no descriptor term: the map would be fixed by the regularizers
+            raise BSFError(f"{name} has zero columns (shape {d.shape}): give at least one "
+                           "descriptor")
         out.append(d)
     dm, dn = out
     if dm.shape[-1] != dn.shape[-1]:

@@ -43,7 +43,7 @@ from jax import lax
 
 from ._validate import check_finite
 from ._errors import BSFError
-from ._spectrum import Spectrum
+from ._spectrum import Spectrum, map_to_unit_area, unit_area_pair
 
 __all__ = ["fmap_from_p2p", "fmap_to_p2p", "zoomout", "icp_refine", "nearest_neighbors"]
 
@@ -224,8 +224,10 @@ def fmap_from_p2p(source_spectrum: Spectrum, target_spectrum: Spectrum, p2p) -> 
     _check_spectrum(source_spectrum, "source_spectrum")
     _check_spectrum(target_spectrum, "target_spectrum")
     idx = _as_index_array(p2p, target_spectrum.n_vertices, source_spectrum.n_vertices, "p2p")
-    return _fmap_from_p2p_jit(idx, source_spectrum.evecs, target_spectrum.evecs,
-                              target_spectrum.mass)
+    # unit-area bases in float64 first: areas of a mesh in units of 1e20 overflow float32
+    sm, am, sn, an = unit_area_pair(source_spectrum, target_spectrum)
+    C = _fmap_from_p2p_jit(idx, sm.evecs, sn.evecs, sn.mass)
+    return map_to_unit_area(C, am, an, inverse=True)
 
 
 def fmap_to_p2p(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *,
@@ -248,7 +250,13 @@ def fmap_to_p2p(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *,
     _check_spectrum(target_spectrum, "target_spectrum")
     kn, km = _check_fmap(C, source_spectrum.k, target_spectrum.k)
     chunk = _chunk_for(source_spectrum.n_vertices, target_spectrum.n_vertices, chunk_size)
-    return _fmap_to_p2p_jit(C, source_spectrum.evecs[:, :km], target_spectrum.evecs[:, :kn],
+    # unit scale before the float32 cast (see fmap_from_p2p)
+    sm, am, sn, an = unit_area_pair(source_spectrum, target_spectrum)
+    # nearest neighbours are invariant to one common factor: Φ_N vs Φ_M Cᵀ both times √S_N
+    # (C·√(S_N/S_M) with the unit-area Φ_M), Φ_N C vs Φ_M both times √S_M (adjoint)
+    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an,
+                         inverse=not adjoint)
+    return _fmap_to_p2p_jit(C, sm.evecs[:, :km], sn.evecs[:, :kn],
                             chunk=chunk, adjoint=bool(adjoint))
 
 

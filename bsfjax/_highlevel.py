@@ -23,7 +23,8 @@ from ._geodesics import geodesic_distances
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._indicators import labels_to_indicators
 from ._sampling import farthest_point_sampling
-from ._spectrum import Spectrum
+from ._spectrum import Spectrum, map_to_unit_area, unit_area_pair
+from ._validate import check_indices, check_source_mesh, compact_labels
 
 __all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", "LabelTransfer",
            "REGIMES"]
@@ -41,11 +42,8 @@ def _check_landmarks(landmarks, n_m: int, n_n: int):
     if src.ndim != 1 or tgt.ndim != 1 or src.shape != tgt.shape or src.size == 0:
         raise BSFError(f"landmarks must be two lists of equal length, got {src.size} source and "
                        f"{tgt.size} target indices")
-    for name, idx, n in (("source", src, n_m), ("target", tgt, n_n)):
-        if not np.issubdtype(idx.dtype, np.integer) or idx.min() < 0 or idx.max() >= n:
-            raise BSFError(f"{name} landmarks must be vertex indices in [0, {n}), got "
-                           f"{idx.tolist()}")
-    return src, tgt
+    return (check_indices(src, "source landmarks", n_m),
+            check_indices(tgt, "target landmarks", n_n))
 
 
 #: Weight of the orientation-preserving term when :func:`estimate_map` has no landmarks but
@@ -80,6 +78,9 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     if not isinstance(refine_to, (int, np.integer)) or not k <= refine_to <= km:
         raise BSFError(f"refine_to must be an integer in [{k}, {km}], got {refine_to!r}")
     lm = _check_landmarks(landmarks, source.n_vertices, target.n_vertices)
+    # the estimation runs on the unit-area shapes (float64 rescaling before any float32 cast);
+    # the maps are converted back to the given bases at the end
+    source, am, target, an = unit_area_pair(source, target)
     dm = [wks(source, n_energies, k=k)]
     dn = [wks(target, n_energies, k=k)]
     if lm is not None:
@@ -94,7 +95,9 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     C_ref = zoomout(C0, source, target, refine_to) if refine_to > k else C0
     p2p = np.asarray(fmap_to_p2p(C_ref, source, target))
     C = np.asarray(fmap_from_p2p(source.truncate(k), target.truncate(k), p2p))
-    return MapEstimate(C=C, p2p=p2p, C_initial=np.asarray(C0))
+    back = lambda X: np.asarray(map_to_unit_area(np.asarray(X), am, an, inverse=True),  # noqa: E731
+                                np.asarray(X).dtype)
+    return MapEstimate(C=back(C), p2p=p2p, C_initial=back(C0))
 
 
 def transfer_values(source: Spectrum, target: Spectrum,
@@ -135,6 +138,9 @@ def transfer_values(source: Spectrum, target: Spectrum,
         if p2p.shape != (target.n_vertices,):
             raise BSFError(f"p2p must have one source index per target vertex "
                            f"({target.n_vertices}), got shape {p2p.shape}")
+        p2p = check_indices(p2p, "p2p", source.n_vertices, what="source vertex indices")
+    if mesh is not None:
+        check_source_mesh(mesh, source.n_vertices, source.mass)
     if p2p is None and (isinstance(method, PullBack) or getattr(method, "frame_transfer", "")
                         == "p2p"):
         raise BSFError(f"method {method_name(method)!r} needs a point map (p2p)")
@@ -171,7 +177,7 @@ def transfer_values(source: Spectrum, target: Spectrum,
 
 class LabelTransfer(NamedTuple):
     labels: np.ndarray  #: ``(n_N,)`` int, −1 where unassigned
-    scores: np.ndarray  #: ``(L, n_N)`` transferred indicator of each label
+    scores: np.ndarray  #: ``(L, n_N)`` transferred indicator of each label present, in increasing order
     unassigned_share: float  #: area share of the target left unassigned
     #: area share of the target where the labels equal the pull-back through the input point
     #: map (``None`` without ``p2p``)
@@ -206,10 +212,11 @@ def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, "
                     **kwargs) -> LabelTransfer:
     """Transfer a segmentation: one step function per label, then arg-max on the target.
 
-    ``labels`` ``(n_M,)`` non-negative ints.  Each label's indicator is transferred with
-    :func:`transfer_values` (``**kwargs``: ``C``, ``p2p``, …); a target vertex takes the label
-    with the largest transferred value, or −1 ("unassigned") when that value is below
-    ``threshold``.
+    ``labels`` ``(n_M,)`` non-negative ints of any size: they are compacted to the ``L`` labels
+    present first, so ``scores`` row ``i`` is the ``i``-th smallest label.  Each label's
+    indicator is transferred with :func:`transfer_values` (``**kwargs``: ``C``, ``p2p``, …); a
+    target vertex takes the label with the largest transferred value, or −1 ("unassigned") when
+    that value is below ``threshold``.
 
     **Arguments:**
 
@@ -231,10 +238,13 @@ def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, "
         threshold = 0.0 if refined else 0.5
     if not 0 <= threshold < 1:
         raise BSFError(f"threshold must be in [0, 1), got {threshold!r}")
-    scores = transfer_values(source, target, np.asarray(labels_to_indicators(lab)),
-                             method=method, **kwargs)
+    # one indicator per label *present*, whatever the ids (an id of 1e12 allocates nothing)
+    ids, codes = compact_labels(lab)
+    scores = transfer_values(source, target,
+                             np.asarray(labels_to_indicators(codes, len(ids))), method=method,
+                             **kwargs)
     best = scores.max(axis=0)
-    out = np.where(best < threshold, -1, scores.argmax(axis=0))
+    out = np.where(best < threshold, -1, ids[scores.argmax(axis=0)].astype(np.int64))
     mass = np.asarray(target.mass, dtype=float)
     share = float(np.sum(mass * (out < 0)) / np.sum(mass))
     p2p = kwargs.get("p2p")

@@ -36,6 +36,9 @@ from ._mesh import Mesh, graph_from_edges, mesh_edges
 
 __all__ = ["random_indicators", "labels_to_indicators", "indicators_to_labels"]
 
+#: Largest indicator stack :func:`labels_to_indicators` builds from the label values alone.
+_INDICATOR_BUDGET_BYTES = 2**31
+
 
 def _random_edge_graph(mesh: Mesh, rng: np.random.Generator, irregularity: float) -> sp.csr_matrix:
     """Edge graph with lengths scaled by log-normal noise, so regions grow irregularly."""
@@ -137,6 +140,13 @@ def labels_to_indicators(labels, n_labels: int | None = None) -> jax.Array:
         raise BSFError("n_labels must be given when labels are traced (under jit/vmap)")
     if n_labels is None:
         n_labels = int(labels.max()) + 1
+        # memory must not follow the label values: refuse what cannot fit, never crash
+        need = n_labels * int(labels.size) * jnp.dtype(jnp.result_type(float)).itemsize
+        if need > _INDICATOR_BUDGET_BYTES:
+            raise BSFError(f"labels has max {labels.max()}: {n_labels} indicators of "
+                           f"{labels.size} entries would take {need / 2**30:.3g} GiB; compact "
+                           "the labels first (numpy.unique(labels, return_inverse=True)) or "
+                           "use transfer_labels, which does")
     if isinstance(n_labels, (bool, np.bool_)) or not isinstance(n_labels, numbers.Integral) \
             or n_labels < 1:
         raise BSFError(f"n_labels must be a positive int, got {n_labels!r}")

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph
 
 from ._files import atomic_path
-from ._errors import MeshError
+from ._errors import BSFError, MeshError
 
 __all__ = ["Mesh", "MeshError", "MeshReport", "load_mesh", "save_mesh", "mesh_edges", "edge_graph",
            "graph_from_edges", "mesh_report", "n_components"]
@@ -530,5 +530,9 @@ def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = Non
     try:
         with atomic_path(dest) as tmp, contextlib.redirect_stdout(io.StringIO()):
             meshio.write(tmp, out)  # the temp name keeps the extension meshio reads
+    except MeshError:
+        raise
+    except BSFError as exc:  # an OSError, already worded with the user's path
+        raise MeshError(str(exc)) from None
     except (meshio.WriteError, ValueError, KeyError) as exc:
         raise MeshError(f"{dest}: cannot write mesh ({exc})") from exc

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._errors import BSFError
+from ._validate import pow2_scale
 
 __all__ = ["relative_error"]
 
@@ -106,4 +107,17 @@ def relative_error(reference, estimate, mass) -> jax.Array:
         m = np.asarray(mass)
         if np.any(m < 0) or not np.all(np.any(m > 0, axis=-1)):
             raise BSFError("mass must be >= 0 with at least one positive vertex area")
-    return _relative_error(reference, estimate, mass)
+    if any(isinstance(x, jax.core.Tracer) for x in (reference, estimate, mass)):
+        return _relative_error(reference, estimate, mass)
+    # concrete inputs: the unit-scale rescaling of _relative_error done first, on the host in
+    # float64, so float64 values beyond the float32 range survive the cast (issue 18)
+    dt = jax.dtypes.canonicalize_dtype(np.result_type(reference.dtype, estimate.dtype,
+                                                      mass.dtype, np.float32))
+    f, e, w = (np.asarray(x, np.float64) for x in (reference, estimate, mass))
+    s = pow2_scale(np.maximum(np.max(np.abs(f), axis=-1), np.max(np.abs(e), axis=-1)))
+    ws = pow2_scale(np.max(w, axis=-1), even=True)  # exact rescalings (powers of 2 and 4)
+    f, e, w = f / s[..., None], e / s[..., None], w / ws[..., None]
+    out = _relative_error(jnp.asarray(f, dt), jnp.asarray(e, dt), jnp.asarray(w, dt))
+    zero = np.sum(w * f * f, axis=-1) == 0  # the absolute-error rule: restore its units
+    unit = np.minimum(np.where(zero, s * np.sqrt(ws), 1.0), np.finfo(dt).max)
+    return out * jnp.asarray(unit, dt)

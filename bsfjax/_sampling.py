@@ -35,6 +35,7 @@ import scipy.sparse.csgraph
 from ._errors import BSFError
 from ._mesh import Mesh, edge_graph
 from ._spectrum import Spectrum
+from ._validate import pow2_scale
 
 __all__ = ["farthest_point_sampling", "edge_graph", "n_samples"]
 
@@ -241,7 +242,11 @@ def farthest_point_sampling(mesh, n, metric: str = "euclidean", seed: int = 0,
         return _fps_geodesic(edge_graph(mesh), first, count)
     if metric == "biharmonic":
         points = _biharmonic_embedding(spectrum, n_points)
-    elif n_points >= PRUNED_FPS_MIN_POINTS and count > 1:
+    # scale does not change the samples: unit scale in float64 before the float32 cast
+    # (coordinates of 1e20 would square to inf, of 1e-20 to 0); a power of two, so exact
+    points = np.asarray(points, np.float64)
+    points = points / pow2_scale(np.max(np.abs(points)) if points.size else 0.0)
+    if metric != "biharmonic" and n_points >= PRUNED_FPS_MIN_POINTS and count > 1:
         return _fps_pruned(points, first, count)
     idx = _fps_points_jit(jnp.asarray(points), jnp.int32(first), count)
     return np.asarray(idx, dtype=np.int64)

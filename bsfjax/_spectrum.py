@@ -26,7 +26,8 @@ from ._errors import BSFError, MeshError
 from ._laplacian import MASS_TYPES, laplacian
 from ._mesh import Mesh, n_components
 
-__all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum", "stack_spectra"]
+__all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum", "stack_spectra",
+           "unit_area", "map_to_unit_area"]
 
 #: Below this many vertices the generalized eigenproblem is solved densely (LAPACK).
 DENSE_LIMIT = 600
@@ -260,10 +261,10 @@ def spectrum(mesh: Mesh, k: int, *, mass: str = "mixed", robust: bool = False,
     result = spectrum_from_operators(W, A, k)
     if path is not None:
         try:
-            with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            with atomic_path(path, immediate=True) as tmp, open(tmp, "wb") as fh:
                 np.savez(fh, evals=result.evals, evecs=result.evecs, mass=result.mass,
                          checksum=np.array(_checksum(result.evals, result.evecs, result.mass)))
-        except OSError as exc:  # a full disk or read-only cache must not lose the result
+        except (OSError, BSFError) as exc:  # a full disk or read-only cache must not lose the result
             warnings.warn(f"could not write spectrum cache file {path} ({exc}); continuing "
                           "without caching it", stacklevel=2)
     return result
@@ -312,3 +313,79 @@ def stack_spectra(spectra) -> Spectrum:
     if len(shapes) != 1:
         raise BSFError(f"spectra to stack must share (n_vertices, k); got {sorted(shapes)}")
     return jax.tree.map(lambda *x: np.stack(x), *spectra)
+
+
+def unit_area_pair(source: Spectrum, target: Spectrum):
+    """``(source', a, target', a)``: both spectra rescaled as :func:`unit_area` but by one
+    common power of 4 (nearest the geometric mean of the two areas, per pair of a stack).
+
+    What a pair-level computation (ZoomOut, nearest neighbours in ``Φ_M Cᵀ`` against ``Φ_N``)
+    needs: the two bases keep their relative scale, so the result is the one of the unscaled
+    shapes bit for bit, while the magnitudes are near 1 before any float32 cast.  Per-shape
+    factors would change that relative scale by up to 4× when the two areas round to
+    different powers (areas 1.99 and 2.01).  Returns ``(source, None, target, None)`` for traced
+    arrays or areas that are not finite and positive.
+    """
+    import jax
+
+    specs = (source, target)
+    if any(isinstance(x, jax.core.Tracer) for s_ in specs for x in (s_.evals, s_.evecs, s_.mass)):
+        return source, None, target, None
+    areas = [np.asarray(s_.mass, np.float64).sum(axis=-1) for s_ in specs]
+    if not all(np.all(np.isfinite(a)) and np.all(a > 0) for a in areas):
+        return source, None, target, None
+    from ._validate import pow2_scale
+
+    a = np.asarray(pow2_scale(np.sqrt(areas[0] * areas[1]), even=True))
+    return _rescaled(source, a), a, _rescaled(target, a), a
+
+
+def _rescaled(spec: Spectrum, a) -> Spectrum:
+    return Spectrum(np.asarray(spec.evals, np.float64) * a[..., None],
+                    np.asarray(spec.evecs, np.float64) * np.sqrt(a)[..., None, None],
+                    np.asarray(spec.mass, np.float64) / a[..., None])
+
+
+def unit_area(spec: Spectrum):
+    """``(spectrum of the shape rescaled to unit area, area)``, computed on the host in float64.
+
+    ``λ ↦ λ·S``, ``Φ ↦ Φ·√S``, ``A ↦ A/S`` with ``S ≈ Σ A`` (the nearest power of 4; per
+    shape of a stack), so the
+    stages after the spectrum, which cast to float32 by default, see unit-scale numbers: a mesh
+    in units of 1e-20 or 1e20 (areas 1e±40, beyond float32) works like one in metres.  A map
+    ``C`` between the original bases is ``C' = C·√(S_M/S_N)`` between the unit-area ones; a
+    function's values do not change.  Returns ``(spec, None)`` for traced arrays (no change).
+    """
+    import jax
+
+    if any(isinstance(x, jax.core.Tracer) for x in (spec.evals, spec.evecs, spec.mass)):
+        return spec, None
+    from ._validate import pow2_scale
+
+    mass = np.asarray(spec.mass, np.float64)
+    area = mass.sum(axis=-1)
+    if not np.all(np.isfinite(area)) or not np.all(area > 0):
+        return spec, None  # nothing to normalize by (the Spectrum check reports bad areas)
+    # S rounded to a power of 4: the rescaling (and √S) is exact, so a mesh of ordinary size
+    # gives bit-identical results, and the areas end up in [0.5, 2]
+    a = np.asarray(pow2_scale(area, even=True))
+    out = Spectrum(np.asarray(spec.evals, np.float64) * a[..., None],
+                   np.asarray(spec.evecs, np.float64) * np.sqrt(a)[..., None, None],
+                   mass / a[..., None])
+    return out, a
+
+
+def map_to_unit_area(C, area_source, area_target, inverse: bool = False):
+    """``C·√(S_M/S_N)`` (a map between original bases → between unit-area bases), or the
+    inverse; ``C`` unchanged when an area is ``None`` (traced)."""
+    if C is None or area_source is None or area_target is None:
+        return C
+    r = np.sqrt(np.asarray(area_source, np.float64) / np.asarray(area_target, np.float64))
+    r = 1.0 / r if inverse else r
+    if np.ndim(r):
+        r = r[..., None, None]
+    if isinstance(C, np.ndarray):
+        return np.asarray(C, np.float64) * r
+    import jax.numpy as jnp
+
+    return C * jnp.asarray(r, jnp.result_type(C))

@@ -22,9 +22,9 @@ from jaxtyping import Array, ArrayLike, Float
 from ._devices import pad_leading, shard_leading
 from ._errors import BSFError
 from ._operator import DENSE_BUDGET_BYTES
-from ._validate import check_finite
+from ._validate import check_finite, homogeneous, restore_scale, unit_scale
 from ._methods import AbstractMethod, Pair, as_method, method_name
-from ._spectrum import Spectrum
+from ._spectrum import Spectrum, map_to_unit_area, unit_area, unit_area_pair
 
 __all__ = ["TransferResult", "transfer", "transfer_pairs", "stack_pairs"]
 
@@ -159,7 +159,9 @@ def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pai
                        f"n_M = {n_m}, got {f_shape}")
     check_finite(f, "f")
     dtype = jax.dtypes.canonicalize_dtype(jnp.float64)
-    F = jnp.asarray(f, dtype)
+    # per function, in float64 before the cast (issue 18); not for an absolute coder eps
+    F, scale = unit_scale(f, dtype) if homogeneous(method) else (jnp.asarray(f, dtype), None)
+    pair = _unit_area_pair(method, pair)
     pair = jax.tree.map(lambda x: jnp.asarray(x, dtype)
                         if np.issubdtype(np.asarray(x).dtype, np.floating) else jnp.asarray(x),
                         pair)
@@ -168,7 +170,7 @@ def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pai
     if not batched and method.frame_entries(pair) * itemsize > DENSE_BUDGET_BYTES:
         # a dense frame would not fit: run eagerly, so that build_frame / transfer_frame make
         # per-vertex-list frames (SparseFrame) and encode / decode use them
-        return TransferResult(*_kernel(method, pair, F, k, kt, batched))
+        return _rescaled(TransferResult(*_kernel(method, pair, F, k, kt, batched)), scale)
     if batched and jax.device_count() > 1:
         # pairs are independent: GSPMD splits the vmapped kernel without communication, each
         # device computing whole pairs (identical results); padding repeats the last pair
@@ -176,8 +178,36 @@ def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pai
         pair, F = jax.tree.map(lambda x: shard_leading(pad_leading(x, d, "edge"), "pairs"),
                                (pair, F))
         out = _run(method, pair, F, k, kt, batched)
-        return TransferResult(*jax.tree.map(lambda x: x[:P], out))
-    return TransferResult(*_run(method, pair, F, k, kt, batched))
+        return _rescaled(TransferResult(*jax.tree.map(lambda x: x[:P], out)), scale)
+    return _rescaled(TransferResult(*_run(method, pair, F, k, kt, batched)), scale)
+
+
+def _unit_area_pair(method: AbstractMethod, pair: Pair) -> Pair:
+    """The pair on the shapes rescaled to unit area (:func:`bsfjax._spectrum.unit_area`), in
+    float64 on the host before any cast: maps ``C``, ``C2`` become ``C·√(S_M/S_N)`` and geodesic
+    distances ``d/√S_M``; every method's output is invariant to this (its scales follow the
+    areas: the ``"unit_area"`` τ convention, ball radii from atom areas).  Not with the
+    ``"raw"`` τ convention, whose τ is in the mesh's own units."""
+    if getattr(method, "tau_convention", "unit_area") != "unit_area":
+        return pair
+    if pair.target is None:
+        source, am = unit_area(pair.source)
+        target = an = None
+    else:  # one factor for both shapes: ZoomOut-type steps see their relative scale unchanged
+        source, am, target, an = unit_area_pair(pair.source, pair.target)
+    if am is None:
+        return pair
+    dist = pair.distances
+    if dist is not None and not isinstance(dist, jax.core.Tracer):
+        dist = np.asarray(dist, np.float64) / np.sqrt(am)[..., None, None]
+    return Pair(source=source, target=target if target is not None else pair.target,
+                C=map_to_unit_area(pair.C, am, an), C2=map_to_unit_area(pair.C2, am, an),
+                p2p=pair.p2p, centers=pair.centers, distances=dist)
+
+
+def _rescaled(res: TransferResult, scale) -> TransferResult:
+    """Every output of a method is linear in ``f``: undo :func:`unit_scale` per function."""
+    return TransferResult(*(restore_scale(x, scale) for x in res))
 
 
 def stack_pairs(pairs: Sequence[Pair]) -> Pair:

@@ -117,9 +117,12 @@ def _read_array(path: str, what: str, dtype=None):
         raise CLIError(f"{what} file {p}: no data")
     if not np.issubdtype(arr.dtype, np.number):
         raise CLIError(f"{what} file {p}: expected numbers, got dtype {arr.dtype}")
-    if dtype is int:
-        if not np.all(np.isfinite(arr)) or not np.all(np.mod(arr, 1) == 0):
-            raise CLIError(f"{what} file {p}: expected integers")
+    if dtype is int and not np.issubdtype(arr.dtype, np.integer):
+        bad = ~np.isfinite(arr) | (np.mod(arr, 1) != 0) | (np.abs(arr) >= 2.0**63)
+        if bad.any():  # the value as read, not as a wrapped-around int64
+            i = int(np.argmax(bad.reshape(-1)))
+            raise CLIError(f"{what} file {p}: expected integers, found {arr.reshape(-1)[i].item()!r} "
+                           f"(entry {i})")
         arr = arr.astype(np.int64)
     return arr
 
@@ -179,12 +182,17 @@ def _cmd_transfer(args) -> int:
         raise CLIError("--map must be 'estimate', 'p2p FILE' or 'fmap FILE'")
     landmarks = _parse_landmarks(args.landmarks)
     source, target = load_mesh(args.source), load_mesh(args.target)
+    if landmarks is not None:
+        from ._validate import check_indices
+
+        check_indices(landmarks[0], "--landmarks (source)", source.n_vertices)
+        check_indices(landmarks[1], "--landmarks (target)", target.n_vertices)
     if args.labels:
         values = _read_array(args.labels, "labels", dtype=int)
         if values.ndim != 1:
             raise CLIError(f"labels file {args.labels}: expected one label per line")
         if values.min() < 0:
-            raise CLIError(f"labels file {args.labels}: labels must be >= 0")
+            raise CLIError(f"labels file {args.labels}: labels must be >= 0, got {values.min()}")
     else:
         values = _read_array(args.function, "function")
         values = values.T if values.ndim == 2 else values
@@ -213,13 +221,20 @@ def _cmd_transfer(args) -> int:
         from ._refine import REFINE_EIGENPAIRS
 
         k_spec = min(max(k_spec, REFINE_EIGENPAIRS), kmax)
+    if kind == "p2p":  # read and checked before the spectra, so a bad file costs nothing
+        p2p = _read_array(rest[0], "p2p", dtype=int)
+        if p2p.shape != (target.n_vertices,):
+            raise CLIError(f"p2p file {rest[0]}: expected {target.n_vertices} source vertex indices in "
+                           f"[0, {source.n_vertices}), got shape {p2p.shape}")
+        from ._validate import check_indices
+
+        try:
+            p2p = check_indices(p2p, "p2p", source.n_vertices, what="source vertex indices")
+        except ValueError as exc:
+            raise CLIError(f"p2p file {rest[0]}: {exc}") from None
     sm, sn = spectrum(source, k_spec), spectrum(target, k_spec)
     print(f"spectra: {source.n_vertices} and {target.n_vertices} vertices, k = {k_spec}", file=sys.stderr)
     if kind == "p2p":
-        p2p = _read_array(rest[0], "p2p", dtype=int)
-        if p2p.shape != (target.n_vertices,) or p2p.min() < 0 or p2p.max() >= source.n_vertices:
-            raise CLIError(f"p2p file {rest[0]}: expected {target.n_vertices} source vertex indices in "
-                           f"[0, {source.n_vertices})")
         from ._fmap import fmap_from_p2p
 
         C = np.asarray(fmap_from_p2p(sm, sn, p2p))
@@ -235,7 +250,7 @@ def _cmd_transfer(args) -> int:
     if args.labels:
         res = transfer_labels(sm, sn, values, threshold=args.threshold, **common)
         result = res.labels.astype(np.int64)
-        print(f"transferred {int(values.max()) + 1} labels with {args.method}; unassigned: "
+        print(f"transferred {np.unique(values).size} labels with {args.method}; unassigned: "
               f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
         if res.regime is not None:
             agree = "" if res.agreement is None else f", {res.agreement:.1%} of the area as the " \
@@ -336,15 +351,92 @@ def _cmd_spectrum(args) -> int:
     return 0
 
 
+#: Options whose value may start with "-" (a negative number, or landmarks "-1,2:3,4"):
+#: argparse would take such a value for an option and answer with its usage text.
+_VALUE_OPTIONS = ("--landmarks", "--seed", "--functions", "--pairs", "--levels", "-k", "--k",
+                  "--threshold")
+
+
+def _join_option_values(argv: list[str]) -> list[str]:
+    """``--seed -5`` → ``--seed=-5``, so that the value reaches our own check, which names the
+    option and prints the value as given."""
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a in _VALUE_OPTIONS and i + 1 < len(argv) and argv[i + 1].startswith("-") \
+                and argv[i + 1] not in ("-h", "--help") and len(argv[i + 1]) > 1 \
+                and (argv[i + 1][1].isdigit() or argv[i + 1][1] == "."):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
+
+
+#: (attribute, option, smallest value) of the integer options, checked before any work.
+_INT_OPTIONS = (("seed", "--seed", 0), ("functions", "--functions", 1), ("pairs", "--pairs", 1),
+                ("k", "-k", 1), ("levels", "--levels", 1))
+
+
+def _check_options(args) -> None:
+    """Every integer option in range, every output path usable and distinct from the inputs,
+    before any work (one line naming the option and the value as given)."""
+    from ._files import check_outputs
+
+    for attr, opt, lo in _INT_OPTIONS:
+        v = getattr(args, attr, None)
+        if isinstance(v, int) and v < lo:
+            raise CLIError(f"{opt} must be an integer >= {lo}, got {v}")
+    cmd = args.command
+    if cmd == "transfer":
+        kind_file = args.map[1] if len(args.map) > 1 else None
+        for opt, path in (("source", args.source), ("target", args.target),
+                          ("--labels", args.labels), ("--function", args.function),
+                          ("--map", kind_file), ("--truth", args.truth)):
+            if path is not None and not Path(path).is_file():  # before the meshes are read
+                raise CLIError(f"{opt} {path}: " + ("is a folder" if Path(path).is_dir()
+                                                     else "no such file"))
+        check_outputs({"--out": args.out, "--mesh-out": args.mesh_out},
+                      {"source": args.source, "target": args.target, "--labels": args.labels,
+                       "--function": args.function, "--map": kind_file,
+                       "--truth": args.truth})
+    elif cmd == "spectrum":
+        check_outputs({"--out": args.out}, {"mesh": args.mesh})
+    elif cmd in ("demo", "example"):
+        check_outputs({"--out": args.out}, folders=("--out",))
+    elif cmd == "reproduce":
+        check_outputs({"--out": args.out, "--cache": args.cache}, {"--data": args.data},
+                      folders=("--out", "--cache"))
+
+
 def main(argv: list[str] | None = None) -> int:
+    from . import _signals
+
+    if not _signals.install():  # Ctrl-C: one line, exit 130, temporaries removed
+        return _main(argv)  # (only in the command's own process, not when called from Python)
+    try:
+        status = _main(argv)
+    except SystemExit as exc:  # argparse: --help, --version, usage errors
+        if isinstance(exc.code, str):
+            print(exc.code, file=sys.stderr)
+        status = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    _signals.exit_now(status)  # no interpreter finalization (see _signals)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_join_option_values(sys.argv[1:] if argv is None else argv))
     if getattr(args, "func", None) is None:
         parser.print_help()
         return 0
     warnings.filterwarnings("ignore", message="JAXopt is no longer maintained")
     try:
-        return int(args.func(args) or 0)
+        from ._files import output_transaction
+
+        _check_options(args)
+        with output_transaction():  # all outputs of the command are renamed together, or none
+            return int(args.func(args) or 0)
     except (ValueError, OSError) as exc:  # bad input: one line, no traceback
         msg = " ".join(str(exc).split()) or type(exc).__name__
         print(f"bsfjax {args.command}: error: {msg}", file=sys.stderr)

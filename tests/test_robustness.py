@@ -162,8 +162,8 @@ BAD_INPUTS = [
      BSFError, r"f contains \d+ NaN or infinite values"),
     ("encode-wrong-length", lambda s: bsfjax.encode(s.frame, np.ones(5)),
      BSFError, r"f has length 5 along its last axis, but the frame has n = 42 vertices"),
-    ("encode-overflowing-values", lambda s: bsfjax.encode(s.frame, s.F * 1e30, weights=None),
-     BSFError, r"f has values up to 1e\+30 .* too large for float(32|64)"),
+    ("decode-overflowing-codes", lambda s: bsfjax.decode(s.frame, np.full(24, 3e38, np.float32)),
+     BSFError, r"alpha decodes to values up to .*, beyond the float32 range"),
     ("encode-sparsity-zero", lambda s: bsfjax.encode(s.frame, s.F, sparsity=0),
      BSFError, r"sparsity must be an integer >= 1, got 0"),
     ("encode-unknown-option", lambda s: bsfjax.encode(s.frame, s.F, "omp", lam=0.1),
@@ -236,7 +236,48 @@ BAD_INPUTS = [
      r"spectra must be a non-empty sequence of bsfjax.Spectrum"),
     ("example-bad-levels", lambda s: bsfjax.example_mesh(levels=0), BSFError,
      r"levels must be an integer in \[1, 5\]"),
+    # --- round 2 (issue 18): one validation layer for every path
+    ("labels-huge-id-indicators", lambda s: bsfjax.labels_to_indicators(
+        np.r_[np.zeros(s.n - 1, int), 10**12]), BSFError,
+     r"labels has max 1000000000000: .* GiB; compact the labels first"),
+    ("p2p-negative-index", lambda s: bsfjax.transfer_values(
+        s.spec, s.spec, s.F, method="p2p", p2p=np.full(s.n, -1)), BSFError,
+     r"p2p must be source vertex indices in \[0, 42\), found 42 outside \(first: p2p\[0\] = -1"),
+    ("p2p-float-index", lambda s: bsfjax.transfer_values(
+        s.spec, s.spec, s.F, method="p2p", p2p=np.full(s.n, 1.0)), BSFError,
+     r"p2p must be integer source vertex indices, got dtype float64 \(first: 1.0\)"),
+    ("p2p-uint64-index", lambda s: bsfjax.transfer_values(
+        s.spec, s.spec, s.F, method="p2p", p2p=np.full(s.n, 2**64 - 1, np.uint64)), BSFError,
+     r"p2p\[0\] = 18446744073709551615"),
+    ("landmarks-float", lambda s: bsfjax.estimate_map(s.spec, s.spec, k=5,
+                                                      landmarks=([1.0, 2.0], [1, 2])),
+     BSFError, r"source landmarks must be integer vertex indices, got dtype float64"),
+    ("landmarks-negative", lambda s: bsfjax.estimate_map(s.spec, s.spec, k=5,
+                                                         landmarks=([1, 2], [-3, 2])),
+     BSFError, r"target landmarks must be vertex indices in \[0, 42\).*= -3"),
+    ("mesh-not-the-source-count", lambda s: bsfjax.transfer_values(
+        s.spec, s.spec, s.F, C=s.C, mesh=bsfjax.example_mesh(levels=1)), BSFError,
+     r"mesh has 506 vertices but the source spectrum has 42: mesh= must be the source mesh"),
+    ("mesh-not-the-source-area", lambda s: bsfjax.transfer_values(
+        s.spec, s.spec, s.F, C=s.C, mesh=bsfjax.Mesh(s.v * 2, s.f)), BSFError,
+     r"mesh has total area .* but the source spectrum's areas sum to"),
+    ("descriptors-zero-columns", lambda s: bsfjax.estimate_fmap(
+        s.spec, s.spec, np.zeros((s.n, 0)), np.zeros((s.n, 0)), k=5), BSFError,
+     r"source_descr has zero columns"),
+    ("sparse-frame-decode-nan", lambda s: bsfjax.decode(_sparse(s), np.full(24, np.nan)),
+     BSFError, r"alpha contains 24 NaN or infinite values"),
+    ("sparse-frame-encode-nan", lambda s: bsfjax.encode(_sparse(s), s.F * np.nan),
+     BSFError, r"f contains 126 NaN or infinite values"),
+    ("sparse-frame-decode-overflow", lambda s: bsfjax.decode(
+        _sparse(s), np.full(24, 3e38, np.float32)), BSFError,
+     r"alpha decodes to values up to .*, beyond the float32 range"),
+    ("save-mesh-unwritable", lambda s: bsfjax.save_mesh(Path(__file__) / "x.ply", s.mesh),
+     MeshError, r"test_robustness.py/x.ply: cannot write \(.*test_robustness.py is not a folder\)"),
 ]
+
+
+def _sparse(s):
+    return bsfjax.build_frame(s.spec, s.centers, sparse=True)
 
 
 def _finite_leaves(out) -> bool:
@@ -293,6 +334,31 @@ def _unwritable_cache(s, tmp):
     return spec.evals, spec.evecs
 
 
+def _same_codes(s, scale):
+    a = np.asarray(bsfjax.encode(s.frame, s.F * scale), np.float64) / scale
+    np.testing.assert_allclose(a, np.asarray(bsfjax.encode(s.frame, s.F)), rtol=1e-4, atol=1e-6)
+    return a
+
+
+def _huge_label_transfer(s):
+    lab = np.where(s.F[0] > 0, 10**12, 7)  # two labels, ids far apart: no 10^12 rows
+    res = bsfjax.transfer_labels(s.spec, s.spec, lab, C=s.C, method="std")
+    assert res.scores.shape == (2, s.n) and set(np.unique(res.labels)) <= {-1, 7, 10**12}
+    assert np.mean(res.labels == lab) > 0.9
+    return res.scores
+
+
+def _scaled_mesh_transfer(s, scale):
+    # a bumpy sphere: no symmetric ties that rounding could break either way
+    v = s.v * (1 + 0.2 * np.random.default_rng(0).random((s.n, 1)))
+    out, ref = (bsfjax.transfer_values(spec, spec, s.F, C=np.eye(10), mesh=mesh)
+                for mesh in (bsfjax.Mesh(v * scale, s.f), bsfjax.Mesh(v, s.f))
+                for spec in [bsfjax.spectrum(mesh, 10)])
+    np.testing.assert_allclose(out, ref, atol=1e-3)  # the unit-scale transfer, not zeros
+    assert np.abs(ref).max() > 0.5
+    return out
+
+
 HANDLED_INPUTS = [
     ("load-zero-area-face", lambda s, tmp: _load_text(
         tmp, "deg.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n2 0 0\n3 0 1 2\n3 0 1 3\n").vertices,
@@ -311,6 +377,15 @@ HANDLED_INPUTS = [
     ("encode-zero-function", lambda s, tmp: _zero_encode_all(s, np.zeros(s.n)), None),
     ("encode-empty-atoms", lambda s, tmp: _empty_atom_frame(s), None),
     ("transfer-with-zero-map", lambda s, tmp: _zero_map_transfer(s), None),
+    ("encode-huge-values", lambda s, tmp: bsfjax.encode(s.frame, s.F * 1e30, weights=None),
+     None),
+    ("encode-tiny-values", lambda s, tmp: _same_codes(s, 1e-30), None),
+    ("labels-huge-ids-transfer", lambda s, tmp: _huge_label_transfer(s), None),
+    ("wks-two-eigenpairs", lambda s, tmp: bsfjax.wks(s.spec, k=2), None),
+    ("transfer-mesh-scaled-1e20", lambda s, tmp: _scaled_mesh_transfer(s, 1e20), None),
+    ("transfer-mesh-scaled-1e-20", lambda s, tmp: _scaled_mesh_transfer(s, 1e-20), None),
+    ("relative-error-float64-beyond-float32", lambda s, tmp: bsfjax.relative_error(
+        1e300 * s.F, 1e300 * np.roll(s.F, 1, 1), s.spec.mass), None),
     ("relative-error-zero-reference", lambda s, tmp: bsfjax.relative_error(
         np.zeros(s.n), s.F[0], s.spec.mass), None),
     ("relative-error-huge-values", lambda s, tmp: bsfjax.relative_error(
@@ -420,9 +495,125 @@ def test_cli_reports_bad_input_in_one_line(tmp_path, capsys, ns):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.txt", "s.off"]
 
 
+# --------------------------------------------------------------------------- CLI (issue 18)
+
+
+def _cli_files(tmp: Path, ns) -> dict:
+    src = tmp / "s.off"
+    bsfjax.save_mesh(src, ns.mesh)
+    lab = tmp / "lab.txt"
+    np.savetxt(lab, (ns.F[0] > 0).astype(int), fmt="%d")
+    fp2p = tmp / "p2p_float.txt"
+    np.savetxt(fp2p, np.full(ns.n, 1.5))
+    up2p = tmp / "p2p_uint.npy"
+    np.save(up2p, np.full(ns.n, 2**64 - 1, np.uint64))
+    (tmp / "dir.txt").mkdir()
+    (tmp / "dir.npz").mkdir()
+    return dict(src=str(src), lab=str(lab), fp2p=str(fp2p), up2p=str(up2p), tmp=str(tmp))
+
+
+def _transfer(f, *extra, out="o.txt"):
+    return ["transfer", f["src"], f["src"], "--labels", f["lab"], "--out",
+            str(Path(f["tmp"]) / out) if "/" not in out else out, *extra]
+
+
+#: (id, argv from the files of _cli_files, regex of the one-line message).  Each must exit
+#: with status 2, print that one line (no traceback) and write nothing.
+CLI_BAD_INPUTS = [
+    ("cli-out-equals-input", lambda f: _transfer(f, out=f["lab"]),
+     r"--out '.*lab.txt' is the same path as the input --labels"),
+    ("cli-out-is-a-folder", lambda f: _transfer(f, out="dir.txt"),
+     r"--out '.*dir.txt': is a folder; give a file name"),
+    ("cli-out-under-a-file", lambda f: _transfer(f, out=f["lab"] + "/o.txt"),
+     r"--out '.*lab.txt/o.txt': '.*lab.txt' is not a folder"),
+    ("cli-outputs-same-path", lambda f: _transfer(f, "--mesh-out", f["tmp"] + "/x.ply",
+                                                  out=f["tmp"] + "/x.ply"),
+     r"--out and --mesh-out are the same path"),
+    ("cli-missing-map-file", lambda f: _transfer(f, "--map", "p2p", f["tmp"] + "/none.txt"),
+     r"--map .*none.txt: no such file"),
+    ("cli-negative-landmark", lambda f: _transfer(f, "--landmarks", "-1,2:3,4"),
+     r"--landmarks \(source\) must be vertex indices in \[0, 42\).*= -1"),
+    ("cli-float-p2p-file", lambda f: _transfer(f, "--map", "p2p", f["fp2p"]),
+     r"p2p file .*p2p_float.txt: expected integers, found 1.5"),
+    ("cli-uint64-p2p-file", lambda f: _transfer(f, "--map", "p2p", f["up2p"]),
+     r"p2p file .*p2p_uint.npy: p2p must be .*p2p\[0\] = 18446744073709551615"),
+    ("cli-negative-seed", lambda f: ["demo", "--seed", "-5", "--out", f["tmp"] + "/d"],
+     r"--seed must be an integer >= 0, got -5"),
+    ("cli-zero-functions", lambda f: ["demo", "--functions", "0", "--out", f["tmp"] + "/d"],
+     r"--functions must be an integer >= 1, got 0"),
+    ("cli-demo-out-is-a-file", lambda f: ["demo", "--out", f["lab"]],
+     r"--out '.*lab.txt': exists and is not a folder"),
+    ("cli-reproduce-out-is-data", lambda f: ["reproduce", "fig7", "--data", f["tmp"],
+                                             "--out", f["tmp"]],
+     r"--out '.*' is the same path as the input --data"),
+    ("cli-spectrum-out-is-a-folder", lambda f: ["spectrum", f["src"], "--out",
+                                                f["tmp"] + "/dir.npz"],
+     r"--out '.*dir.npz': is a folder"),
+]
+
+
+@pytest.mark.parametrize("case", CLI_BAD_INPUTS, ids=[c[0] for c in CLI_BAD_INPUTS])
+def test_cli_bad_input_one_line_status_2_nothing_written(tmp_path, capsys, ns, case):
+    from bsfjax.cli import main
+
+    _, argv, match = case
+    files = _cli_files(tmp_path, ns)
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    capsys.readouterr()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rc = main(argv(files))
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.strip().splitlines() if ln.startswith("bsfjax")]
+    assert rc == 2 and "Traceback" not in err, err
+    assert len(lines) == 1 and re.search(match, lines[0]), err
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before
+
+
+def test_cli_outputs_all_or_none(tmp_path, capsys, ns, monkeypatch):
+    """The second output fails after the first was written: neither is left, the message
+    names the user's path (not the temporary file), and an existing file keeps its content."""
+    from bsfjax import cli
+    from bsfjax._files import atomic_path
+
+    files = _cli_files(tmp_path, ns)
+    old = tmp_path / "m.ply"
+    old.write_text("previous")
+
+    def failing_write(path, arr):
+        with atomic_path(path) as tmp:
+            tmp.write_text("partial")
+            raise OSError(28, "No space left on device", str(tmp))
+
+    monkeypatch.setattr(cli, "_write_array", failing_write)
+    argv = _transfer(files, "--map", "p2p", files["lab"].replace("lab", "p2p"),
+                     "--mesh-out", str(old), "--method", "std")
+    np.savetxt(files["lab"].replace("lab", "p2p"), np.arange(ns.n), fmt="%d")
+    rc = cli.main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and err[-1].endswith("o.txt: cannot write (No space left on device)"), err
+    assert ".tmp" not in err[-1]
+    assert old.read_text() == "previous" and not (tmp_path / "o.txt").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_cli_huge_label_ids(tmp_path, capsys, ns):
+    """A label id of 10^12 is a label like any other (no allocation by id)."""
+    from bsfjax.cli import main
+
+    files = _cli_files(tmp_path, ns)
+    lab = np.where(ns.F[0] > 0, 10**12, 3)
+    np.savetxt(files["lab"], lab, fmt="%d")
+    np.savetxt(tmp_path / "p2p.txt", np.arange(ns.n), fmt="%d")
+    rc = main(_transfer(files, "--map", "p2p", str(tmp_path / "p2p.txt"), "--method", "std"))
+    assert rc == 0, capsys.readouterr().err
+    got = np.loadtxt(tmp_path / "o.txt", dtype=np.int64)
+    assert set(np.unique(got)) <= {-1, 3, 10**12} and np.mean(got == lab) > 0.9
+
+
 def test_docs_table_lists_every_case():
     text = DOC.read_text()
-    ids = [c[0] for c in BAD_INPUTS + HANDLED_INPUTS]
+    ids = [c[0] for c in BAD_INPUTS + HANDLED_INPUTS + CLI_BAD_INPUTS]
     from .test_fuzz_readers import READER_CASES
 
     ids += [c[0] for c in READER_CASES]
