@@ -39,7 +39,7 @@ from jax import lax
 from ._descriptors import _auto_energies, _nonzero, _prepare, _signature
 from ._errors import BSFError
 from ._fmap import _chunk_for, _from_p2p, _nearest, _to_p2p
-from ._spectrum import Spectrum
+from ._spectrum import Spectrum, unit_area_pair
 
 __all__ = ["refine_point_maps", "refinement_sizes", "REFINE_EIGENPAIRS"]
 
@@ -181,6 +181,8 @@ def refine_point_maps(source: Spectrum, target: Spectrum, p2p, *, k_start: int =
             raise BSFError(f"{name} must be a bsfjax.Spectrum, got {type(s).__name__}")
     p = check_point_map(p2p, source.n_vertices, target.n_vertices)
     sizes = sizes_for(source.k, target.k, k_start, k_max, step)
+    # unit magnitudes on the host in float64 before the float32 cast, one factor for both
+    source, _, target, _ = unit_area_pair(source, target)
     return _refine_jit(jnp.asarray(p), source, target, sizes=sizes,
                        n_keep=min(n_keep, len(sizes)), weight=float(descriptor_weight),
                        dims=int(descriptor_dims), n_energies=int(n_energies),

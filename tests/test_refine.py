@@ -140,3 +140,20 @@ def test_bad_point_maps(pair):
         bj.refine_point_maps(sm, sn, p.astype(float))
     with pytest.raises(bj.BSFError, match="needs a functional map C or a point map"):
         bj.transfer_labels(sm, sn, ex.labels)
+
+
+@pytest.mark.parametrize("c", [2.0 ** -40, 2.0 ** 40])
+def test_pair_scaled_by_a_common_factor(pair, c):
+    """Both meshes scaled by c (λ/c², Φ/c, A·c²): the same labels; the pair is rescaled on the
+    host by one common power of 4 before the float32 cast (areas of 1e±24 would not survive)."""
+    ex, sm, sn = pair
+    scale = lambda s: bj.Spectrum(np.asarray(s.evals) / c ** 2, np.asarray(s.evecs) / c,  # noqa
+                                  np.asarray(s.mass) * c ** 2)
+    p0 = _corrupt(sn.n_vertices, 0.2, seed=7)
+    method = bj.RefinedPullBack(k_start=20, step=10)
+    want = bj.transfer_labels(sm, sn, ex.labels, p2p=p0, method=method).labels
+    got = bj.transfer_labels(scale(sm), scale(sn), ex.labels, p2p=p0, method=method).labels
+    np.testing.assert_array_equal(got, want)
+    maps = np.asarray(bj.refine_point_maps(scale(sm), scale(sn), p0, k_start=20, step=10))
+    np.testing.assert_array_equal(maps, np.asarray(bj.refine_point_maps(sm, sn, p0, k_start=20,
+                                                                        step=10)))
