@@ -35,7 +35,9 @@ from .._methods import (BSF, CODER_NAMES, METHODS as _METHODS, PAPER_GAMMA, PAPE
 from .._transfer import TransferResult, stack_pairs
 from .._transfer import transfer as _run_transfer
 
-METHODS = tuple(_METHODS)
+#: The paper's methods (ours and its competitors): the registry without the methods beyond the
+#: paper ("refined", whose table is ``reproduce segmentation``).
+METHODS = tuple(m for m in _METHODS if m != "refined")
 CODERS = CODER_NAMES
 
 __all__ = ["METHODS", "CODERS", "APPROX_METHODS", "TRANSFER_METHODS", "KN_METHODS",
