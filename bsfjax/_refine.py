@@ -38,7 +38,7 @@ from jax import lax
 
 from ._descriptors import _auto_energies, _nonzero, _prepare, _signature
 from ._errors import BSFError
-from ._fmap import _chunk_for, _from_p2p, _nearest, _to_p2p
+from ._fmap import _as_index_array, _chunk_for, _from_p2p, _nearest, _to_p2p
 from ._spectrum import Spectrum, unit_area_pair
 
 __all__ = ["refine_point_maps", "refinement_sizes", "REFINE_EIGENPAIRS"]
@@ -179,7 +179,7 @@ def refine_point_maps(source: Spectrum, target: Spectrum, p2p, *, k_start: int =
     for name, s in (("source", source), ("target", target)):
         if not isinstance(s, Spectrum):
             raise BSFError(f"{name} must be a bsfjax.Spectrum, got {type(s).__name__}")
-    p = check_point_map(p2p, source.n_vertices, target.n_vertices)
+    p = _as_index_array(p2p, target.n_vertices, source.n_vertices, "p2p")
     sizes = sizes_for(source.k, target.k, k_start, k_max, step)
     # unit magnitudes on the host in float64 before the float32 cast, one factor for both
     source, _, target, _ = unit_area_pair(source, target)
@@ -187,20 +187,6 @@ def refine_point_maps(source: Spectrum, target: Spectrum, p2p, *, k_start: int =
                        n_keep=min(n_keep, len(sizes)), weight=float(descriptor_weight),
                        dims=int(descriptor_dims), n_energies=int(n_energies),
                        chunk=_chunk_for(source.n_vertices, target.n_vertices, None))
-
-
-def check_point_map(p2p, n_source: int, n_target: int) -> np.ndarray:
-    """``p2p`` as an int array of ``n_target`` source vertex indices, or a clear error."""
-    p = np.asarray(p2p)
-    if p.shape != (n_target,):
-        raise BSFError(f"p2p must have one source index per target vertex ({n_target}), got "
-                       f"shape {p.shape}")
-    if not np.issubdtype(p.dtype, np.integer):
-        raise BSFError(f"p2p must hold integer vertex indices, got dtype {p.dtype}")
-    if p.size and (p.min() < 0 or p.max() >= n_source):
-        raise BSFError(f"p2p must hold source vertex indices in [0, {n_source}), got values in "
-                       f"[{p.min()}, {p.max()}]")
-    return p
 
 
 def _check_int(value, name: str, lo: int) -> int:
