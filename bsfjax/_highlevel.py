@@ -202,9 +202,9 @@ REGIMES = ("kept", "refined", "corrected", "unreliable")
 def _regime(agreement: float | None, confidence: float) -> str:
     if confidence < 0.8:
         return "unreliable"
-    if agreement is None or agreement >= 0.99:
-        return "kept" if agreement is not None else "refined"
-    return "refined" if agreement >= 0.9 else "corrected"
+    if agreement is None:  # no input point map to compare with
+        return "refined"
+    return "kept" if agreement >= 0.99 else "refined" if agreement >= 0.9 else "corrected"
 
 
 def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, " n_M"], *,

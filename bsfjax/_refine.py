@@ -33,13 +33,13 @@ import math
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax import lax
 
 from ._descriptors import _auto_energies, _nonzero, _prepare, _signature
 from ._errors import BSFError
 from ._fmap import _as_index_array, _chunk_for, _from_p2p, _nearest, _to_p2p
 from ._spectrum import Spectrum, unit_area_pair
+from ._validate import check_int, check_real
 
 __all__ = ["refine_point_maps", "refinement_sizes", "REFINE_EIGENPAIRS"]
 
@@ -130,16 +130,15 @@ def start_point_map(pair_p2p, C, spec_m: Spectrum, spec_n: Spectrum, chunk: int)
 def check_options(*, k_start, k_max, step, n_keep, descriptor_weight, descriptor_dims,
                   n_energies) -> None:
     """Raise :class:`~bsfjax.BSFError` for an out-of-range option (names as given)."""
-    _check_int(k_start, "k_start", 1)
+    check_int(k_start, "k_start", 1)
     if k_max is not None:
-        _check_int(k_max, "k_max", 1)
-    _check_int(step, "step", 1)
-    _check_int(n_keep, "n_vote", 1)
-    _check_int(descriptor_dims, "descriptor_dims", 1)
-    _check_int(n_energies, "n_energies", 2)
-    if (not isinstance(descriptor_weight, (int, float, np.floating)) or isinstance(
-            descriptor_weight, bool) or not np.isfinite(descriptor_weight) or descriptor_weight < 0):
-        raise BSFError(f"descriptor_weight must be a finite number ≥ 0, got {descriptor_weight!r}")
+        check_int(k_max, "k_max", 1)
+    check_int(step, "step", 1)
+    check_int(n_keep, "n_vote", 1)
+    check_int(descriptor_dims, "descriptor_dims", 1)
+    check_int(n_energies, "n_energies", 2)
+    if check_real(descriptor_weight, "descriptor_weight") < 0:
+        raise BSFError(f"descriptor_weight must be ≥ 0, got {descriptor_weight!r}")
     if descriptor_dims > n_energies:
         raise BSFError(f"descriptor_dims ({descriptor_dims}) must be at most n_energies "
                        f"({n_energies})")
@@ -187,9 +186,3 @@ def refine_point_maps(source: Spectrum, target: Spectrum, p2p, *, k_start: int =
                        n_keep=min(n_keep, len(sizes)), weight=float(descriptor_weight),
                        dims=int(descriptor_dims), n_energies=int(n_energies),
                        chunk=_chunk_for(source.n_vertices, target.n_vertices, None))
-
-
-def _check_int(value, name: str, lo: int) -> int:
-    if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < lo:
-        raise BSFError(f"{name} must be an integer ≥ {lo}, got {value!r}")
-    return int(value)
