@@ -489,12 +489,14 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     return clean_mesh(pts, faces, name=str(p))
 
 
-def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = None) -> None:
+def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = None, *,
+              immediate: bool = False) -> None:
     """Write ``mesh`` (and optional per-vertex arrays) atomically; format from the extension.
 
     ``point_data`` maps names to arrays of length ``n_vertices`` (e.g. a transferred
     segmentation or an error map).  PLY keeps them as vertex properties that MeshLab shows;
-    ``red``/``green``/``blue`` uint8 arrays become vertex colours.
+    ``red``/``green``/``blue`` uint8 arrays become vertex colours.  ``immediate``: as
+    :func:`bsfjax._files.atomic_path` (in place at once, even inside an output transaction).
     """
     import meshio
 
@@ -528,7 +530,8 @@ def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = Non
     faces = np.asarray(mesh.faces, dtype=np.int32 if small_ints else np.int64)
     out = meshio.Mesh(np.asarray(mesh.vertices), [("triangle", faces)], point_data=data)
     try:
-        with atomic_path(dest) as tmp, contextlib.redirect_stdout(io.StringIO()):
+        with atomic_path(dest, immediate=immediate) as tmp, \
+                contextlib.redirect_stdout(io.StringIO()):
             meshio.write(tmp, out)  # the temp name keeps the extension meshio reads
     except MeshError:
         raise

@@ -63,8 +63,17 @@ def _wks_std(evals, evecs, mass, n_energies: int):
     gap = energies[:, None] - jnp.log(jnp.where(keep, ev, 1.0))[None, :]
     weights = jnp.where(keep[None, :], jnp.exp(-gap * gap / (2 * sigma ** 2)), 0.0)
     F = _signature(weights, phi, None, True)  # (n, E)
-    sd = jnp.std(F, axis=0)
-    return (F - jnp.mean(F, axis=0)) / jnp.where(sd > 0, sd, 1.0) / math.sqrt(n_energies)
+    # statistics over the shape's own vertices: zero-mass rows are padding (size buckets of
+    # bsfjax.transfer_collection) and must not move them
+    valid = (jnp.asarray(mass) > 0)[:, None]
+    mean = _vertex_mean(F, valid)
+    sd = jnp.sqrt(_vertex_mean((F - mean) ** 2, valid))
+    return (F - mean) / jnp.where(sd > 0, sd, 1.0) / math.sqrt(n_energies)
+
+
+def _vertex_mean(x, valid):
+    """Mean over the rows of ``x`` where ``valid`` (the real vertices), per column."""
+    return jnp.sum(jnp.where(valid, x, 0.0), axis=0) / jnp.maximum(jnp.sum(valid), 1)
 
 
 def _descriptors(spec_m: Spectrum, spec_n: Spectrum, k: int, n_energies: int, dims: int):
@@ -100,7 +109,7 @@ def refine_core(p2p, spec_m: Spectrum, spec_n: Spectrum, *, sizes: tuple[int, ..
         cur = (cols < sizes_arr[it]).astype(dt)
         ref, qry = phi_m * cur @ C.T, phi_n * cur
         if weight > 0:
-            s = weight * jnp.mean(jnp.linalg.norm(qry, axis=1))
+            s = weight * _vertex_mean(jnp.linalg.norm(qry, axis=1), mass_n > 0)
             ref = jnp.concatenate([ref, s * dm], axis=1)
             qry = jnp.concatenate([qry, s * dn], axis=1)
         p = _nearest(ref, qry, chunk)

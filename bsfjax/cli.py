@@ -38,17 +38,24 @@ def build_parser() -> argparse.ArgumentParser:
                    help="subdivision levels: 126*4^levels+2 vertices (default 3: 8066)")
     p.set_defaults(func=_cmd_example)
 
-    p = sub.add_parser("transfer", help="transfer a segmentation or a function from one mesh to another")
+    p = sub.add_parser("transfer", help="transfer a segmentation or a function from one mesh to "
+                                        "another, or to many (--out-dir)")
     p.add_argument("source", help="source mesh (OFF, PLY, OBJ, STL, ...)")
-    p.add_argument("target", help="target mesh")
+    p.add_argument("target", nargs="+", help="target mesh; with --out-dir any number of files, "
+                                             "folders (their mesh files) or glob patterns")
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--labels", help="one integer label per source vertex (.txt or .npy)")
     what.add_argument("--function", help="per-source-vertex values: (n,) or (n, m) (.txt or .npy)")
-    p.add_argument("--out", required=True, help="per-target-vertex labels/values (.txt or .npy)")
+    p.add_argument("--out", help="per-target-vertex labels/values (.txt or .npy), one target")
+    p.add_argument("--out-dir", help="many targets: write DIR/<target name>.txt and "
+                                     "DIR/summary.json; complete outputs are skipped on a rerun")
     p.add_argument("--map", nargs="+", default=["estimate"], metavar="KIND [FILE]",
                    help="'estimate' (default: WKS + landmarks + ZoomOut), 'p2p FILE' (one source "
-                        "vertex index per target vertex) or 'fmap FILE' (k x k matrix, source -> target)")
+                        "vertex index per target vertex) or 'fmap FILE' (k x k matrix, source -> "
+                        "target); with --out-dir: 'estimate'")
     p.add_argument("--landmarks", help="landmark vertex indices 'i,j,...:i2,j2,...' (source:target)")
+    p.add_argument("--landmarks-file", help="--out-dir: JSON {target file name: [[source "
+                                            "indices], [target indices]]}")
     p.add_argument("-k", type=int, default=30, help="spectral basis size (default 30)")
     p.add_argument("--method", default=None,
                    help="transfer method: refined (default: pull-back through the refined map; "
@@ -56,11 +63,24 @@ def build_parser() -> argparse.ArgumentParser:
                         "(pull-back), omp, omp_error, lstsq, lasso (the paper's BSF coders), std, "
                         "prod, geod, heat")
     p.add_argument("--mesh-out", help="also write the target mesh coloured by the result (.ply)")
+    p.add_argument("--mesh-out-dir", help="--out-dir: also write DIR/<target name>.ply coloured")
     p.add_argument("--threshold", type=float, default=None,
                    help="labels: a target vertex whose best score is below this is unassigned (-1) "
                         "(default 0.5; 0 for 'refined', whose scores are vote shares)")
     p.add_argument("--truth", help="labels: ground-truth label per target vertex (.txt or .npy); "
                                    "report the share of the target's area labelled correctly")
+    p.add_argument("--truth-dir", help="--out-dir: folder of <target name>.txt/.npy ground "
+                                       "truths; summary.json reports each accuracy")
+    p.add_argument("--overwrite", action="store_true", help="--out-dir: recompute complete outputs")
+    p.add_argument("--batch-size", type=int, default=4, help="--out-dir: targets per batch "
+                   "(one vmapped kernel call, split over the devices; default 4)")
+    p.add_argument("--spectrum-cache", help="folder caching the eigenbases between runs")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--coordinator", help="--out-dir on several processes (jax.distributed): "
+                   "HOST:PORT of process 0; without these flags a SLURM or Open MPI job is "
+                   "detected by itself")
+    p.add_argument("--num-processes", type=int, help="number of processes (jax.distributed)")
+    p.add_argument("--process-id", type=int, help="this process's rank in [0, N)")
     p.set_defaults(func=_cmd_transfer)
 
     p = sub.add_parser("spectrum", help="compute the Laplace-Beltrami spectrum of a mesh")
@@ -158,19 +178,79 @@ def _parse_landmarks(text: str | None):
     return src, tgt
 
 
-def _cmd_transfer(args) -> int:
+def read_values(args, n_source: int):
+    """The ``--labels`` (int, ``(n,)``) or ``--function`` (``(m, n)``) of a transfer, checked."""
+    if args.labels:
+        values = _read_array(args.labels, "labels", dtype=int)
+        if values.ndim != 1:
+            raise CLIError(f"labels file {args.labels}: expected one label per line")
+        if values.min() < 0:
+            raise CLIError(f"labels file {args.labels}: labels must be >= 0, got {values.min()}")
+    else:
+        values = _read_array(args.function, "function")
+        values = values.T if values.ndim == 2 else values
+    if values.shape[-1] != n_source:
+        raise CLIError(f"{'labels' if args.labels else 'function'} file has {values.shape[-1]} "
+                       f"entries per function but the source mesh has {n_source} vertices")
+    return values
+
+
+def coloured_point_data(result, labels: bool) -> dict:
+    """PLY vertex properties of a transfer: the result and its colours."""
     import numpy as np
 
-    from ._highlevel import estimate_map, transfer_labels, transfer_values
+    if labels:
+        from .plot import _label_colour  # the segmentation palette of the figures
+
+        rgb = _label_colour(result)
+        data = {"label": result}
+    else:
+        from matplotlib import colormaps
+
+        v = result if result.ndim == 1 else result[:, 0]
+        lo, hi = float(np.min(v)), float(np.max(v))
+        rgb = colormaps["viridis"]((v - lo) / (hi - lo if hi > lo else 1.0))[:, :3]
+        data = {"value": v}
+    rgb8 = np.clip(np.round(255 * rgb), 0, 255).astype(np.uint8)
+    data.update(red=rgb8[:, 0], green=rgb8[:, 1], blue=rgb8[:, 2])
+    return data
+
+
+#: Options of the multi-target form only, and of the one-target form only.
+_MANY_ONLY = (("landmarks_file", "--landmarks-file"), ("truth_dir", "--truth-dir"),
+              ("mesh_out_dir", "--mesh-out-dir"), ("coordinator", "--coordinator"),
+              ("num_processes", "--num-processes"), ("process_id", "--process-id"))
+_ONE_ONLY = (("out", "--out"), ("landmarks", "--landmarks"), ("mesh_out", "--mesh-out"),
+             ("truth", "--truth"))
+
+
+def _cmd_transfer(args) -> int:
     from ._methods import METHODS
-    from ._mesh import load_mesh, save_mesh
-    from ._spectrum import spectrum
 
     names = tuple(m for m in METHODS if m not in CLI_EXCLUDED)
     if args.method is None:  # a given point map is trusted as it is; an estimated one is refined
         args.method = "p2p" if args.map[0] == "p2p" else "refined"
     if args.method not in names:
         raise CLIError(f"--method must be one of {', '.join(names)}, got {args.method!r}")
+    if args.out_dir is not None:
+        from ._cli_many import cmd_transfer_many
+
+        if args.map != ["estimate"]:
+            raise CLIError("with --out-dir the map is estimated per target (--map estimate); "
+                           "transfer through given maps one target at a time (--out)")
+        if args.truth_dir is not None and not args.labels:
+            raise CLIError("--truth-dir compares labels: use it with --labels")
+        return cmd_transfer_many(args, CLIError)
+    return _transfer_one(args)
+
+
+def _transfer_one(args) -> int:
+    import numpy as np
+
+    from ._highlevel import estimate_map, transfer_labels, transfer_values
+    from ._mesh import load_mesh, save_mesh
+    from ._spectrum import spectrum
+
     if Path(args.out).suffix not in (".npy", ".txt"):
         raise CLIError(f"--out {args.out}: use a .txt or .npy file name")
     if args.truth and not args.labels:
@@ -187,18 +267,7 @@ def _cmd_transfer(args) -> int:
 
         check_indices(landmarks[0], "--landmarks (source)", source.n_vertices)
         check_indices(landmarks[1], "--landmarks (target)", target.n_vertices)
-    if args.labels:
-        values = _read_array(args.labels, "labels", dtype=int)
-        if values.ndim != 1:
-            raise CLIError(f"labels file {args.labels}: expected one label per line")
-        if values.min() < 0:
-            raise CLIError(f"labels file {args.labels}: labels must be >= 0, got {values.min()}")
-    else:
-        values = _read_array(args.function, "function")
-        values = values.T if values.ndim == 2 else values
-    if values.shape[-1] != source.n_vertices:
-        raise CLIError(f"{'labels' if args.labels else 'function'} file has {values.shape[-1]} "
-                       f"entries per function but the source mesh has {source.n_vertices} vertices")
+    values = read_values(args, source.n_vertices)
     truth = None
     if args.truth:
         truth = _read_array(args.truth, "truth", dtype=int)
@@ -266,21 +335,7 @@ def _cmd_transfer(args) -> int:
         result = transfer_values(sm, sn, values, **common)
         result = result.T if result.ndim == 2 else result
     if args.mesh_out:
-        from .plot import _label_colour  # the segmentation palette of the figures
-
-        if args.labels:
-            rgb = _label_colour(result)
-            data = {"label": result}
-        else:
-            from matplotlib import colormaps
-
-            v = result if result.ndim == 1 else result[:, 0]
-            lo, hi = float(np.min(v)), float(np.max(v))
-            rgb = colormaps["viridis"]((v - lo) / (hi - lo if hi > lo else 1.0))[:, :3]
-            data = {"value": v}
-        rgb8 = np.clip(np.round(255 * rgb), 0, 255).astype(np.uint8)
-        data.update(red=rgb8[:, 0], green=rgb8[:, 1], blue=rgb8[:, 2])
-        save_mesh(args.mesh_out, target, point_data=data)
+        save_mesh(args.mesh_out, target, point_data=coloured_point_data(result, bool(args.labels)))
     _write_array(args.out, result)
     print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else ""), file=sys.stderr)
     return 0
@@ -354,7 +409,7 @@ def _cmd_spectrum(args) -> int:
 #: Options whose value may start with "-" (a negative number, or landmarks "-1,2:3,4"):
 #: argparse would take such a value for an option and answer with its usage text.
 _VALUE_OPTIONS = ("--landmarks", "--seed", "--functions", "--pairs", "--levels", "-k", "--k",
-                  "--threshold")
+                  "--threshold", "--batch-size", "--num-processes", "--process-id")
 
 
 def _join_option_values(argv: list[str]) -> list[str]:
@@ -379,6 +434,26 @@ _INT_OPTIONS = (("seed", "--seed", 0), ("functions", "--functions", 1), ("pairs"
                 ("k", "-k", 1), ("levels", "--levels", 1))
 
 
+def _check_transfer_form(args) -> None:
+    """One target with ``--out`` or many with ``--out-dir``; each form's own options only."""
+    if (args.out is None) == (args.out_dir is None):
+        raise CLIError("give --out FILE (one target) or --out-dir DIR (one or more targets)")
+    if args.out is not None:
+        if len(args.target) != 1:
+            raise CLIError(f"--out takes one target, got {len(args.target)}; use --out-dir DIR "
+                           "for several")
+        bad = [opt for attr, opt in _MANY_ONLY if getattr(args, attr) is not None]
+        if args.overwrite:
+            bad.append("--overwrite")
+    else:
+        bad = [opt for attr, opt in _ONE_ONLY if getattr(args, attr) is not None]
+    if bad:
+        form = "--out FILE" if args.out is not None else "--out-dir DIR"
+        raise CLIError(f"{', '.join(bad)} cannot be used with {form}")
+    if args.batch_size < 1:
+        raise CLIError(f"--batch-size must be an integer >= 1, got {args.batch_size}")
+
+
 def _check_options(args) -> None:
     """Every integer option in range, every output path usable and distinct from the inputs,
     before any work (one line naming the option and the value as given)."""
@@ -390,6 +465,21 @@ def _check_options(args) -> None:
             raise CLIError(f"{opt} must be an integer >= {lo}, got {v}")
     cmd = args.command
     if cmd == "transfer":
+        _check_transfer_form(args)
+        if args.out_dir is not None:
+            for opt, path in (("source", args.source), ("--labels", args.labels),
+                              ("--function", args.function),
+                              ("--landmarks-file", args.landmarks_file)):
+                if path is not None and not Path(path).is_file():
+                    raise CLIError(f"{opt} {path}: " + ("is a folder" if Path(path).is_dir()
+                                                         else "no such file"))
+            if args.truth_dir is not None and not Path(args.truth_dir).is_dir():
+                raise CLIError(f"--truth-dir {args.truth_dir}: no such folder")
+            check_outputs({"--out-dir": args.out_dir, "--mesh-out-dir": args.mesh_out_dir},
+                          {"source": args.source, "--labels": args.labels,
+                           "--function": args.function}, folders=("--out-dir", "--mesh-out-dir"))
+            return
+        args.target = args.target[0]
         kind_file = args.map[1] if len(args.map) > 1 else None
         for opt, path in (("source", args.source), ("target", args.target),
                           ("--labels", args.labels), ("--function", args.function),

@@ -1,0 +1,404 @@
+r"""One segmentation (or function) to a whole collection of targets, in batches.
+
+For one source ``M`` and targets ``N₁ … N_T`` this does what :func:`bsfjax.estimate_map`
+followed by :func:`bsfjax.transfer_labels` does for each pair — WKS descriptors (and landmark
+WKS), the functional map of :func:`bsfjax.estimate_fmap` (orientation term without
+landmarks), ZoomOut, its point map, and the method's transfer through the one engine
+(``method.prepare`` / ``carry``) — but with the source prepared once and the targets run
+through **one jitted, vmapped kernel** per group of equal shapes:
+
+- **size buckets**: a target of ``n`` vertices (``m`` faces) is padded to the bucket size
+  ``size_bucket(n)`` (``size_bucket(m)``): extra vertices have zero mass and zero eigenvector
+  rows, extra faces zero area.  Every stage weighs vertices by mass or uses the target's
+  vertices only as queries, so the padded target gives the unpadded results (tested); the
+  kernel compiles once per bucket, not once per vertex count.
+- **devices**: a batch of targets is split over this process's JAX devices
+  (:func:`bsfjax._devices.map_over_devices`);
+- **processes**: under ``jax.distributed`` target ``i`` belongs to the process owning global
+  device ``i mod D``, so the processes share the targets without any communication, and a
+  target's result does not depend on which process or batch computed it.
+
+The eigensolve of each target stays on the host (scipy), one target at a time, as in the
+single-pair path.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._descriptors import _wks_jit
+from ._devices import pad_leading, shard_leading
+from ._errors import BSFError
+from ._estimation import FmapWeights, _cast, _energy, _geometry, _Geometry, _setup, _Shape, \
+    _solve, _weights_array
+from ._fmap import _DEFAULT_BUDGET, _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
+from ._highlevel import ORIENT_WEIGHT, _regime
+from ._indicators import labels_to_indicators
+from ._mesh import Mesh, load_mesh
+from ._methods import BSF, GeodesicBalls, Pair, RefinedPullBack, SaturatedHeat, \
+    SpectralProjection, as_method
+from ._refine import REFINE_EIGENPAIRS
+from ._spectrum import Spectrum, spectrum, unit_area
+from ._validate import check_indices, check_int, compact_labels, pow2_scale
+
+__all__ = ["transfer_collection", "TargetTransfer", "size_bucket", "BUCKET_FACTORS"]
+
+#: Bucket sizes are ``c · 2^j`` for ``c`` in these factors: neighbouring sizes differ by at
+#: most 1.5×, so padding adds at most 50 % (about 20 % on average) and a collection of
+#: 3.4K–6.9K-vertex targets compiles the kernel for 2 or 3 sizes.
+BUCKET_FACTORS = (4, 6)
+
+
+def size_bucket(n: int) -> int:
+    """The smallest ``c · 2^j ≥ n`` with ``c`` in :data:`BUCKET_FACTORS` (``n ≥ 1``)."""
+    j = max(0, int(n).bit_length() - 4)
+    while True:
+        for c in BUCKET_FACTORS:
+            if c << j >= n:
+                return c << j
+        j += 1
+
+
+class TargetTransfer(NamedTuple):
+    """The result for one target of :func:`transfer_collection`."""
+
+    labels: np.ndarray | None  #: ``(n_N,)`` int labels (−1 unassigned), or ``None`` for values
+    values: np.ndarray  #: ``(m, n_N)`` transferred functions (for labels: the label scores)
+    p2p: np.ndarray  #: ``(n_N,)`` the estimated point map (target vertex → source vertex)
+    C: np.ndarray  #: ``(k, k)`` the estimated functional map
+    map_energy: float  #: the estimation energy E(C) of :func:`bsfjax.estimate_fmap` at ``C``
+    unassigned_share: float  #: area share of the target left unassigned (labels)
+    agreement: float | None  #: area share equal to the pull-back through ``p2p`` (labels)
+    confidence: float | None  #: area-weighted mean winning score (labels)
+    regime: str | None  #: ``"refined"`` only: see :data:`bsfjax.REGIMES`
+    n_vertices: int
+    mass: np.ndarray  #: ``(n_N,)`` vertex areas of the target (relative: for area shares)
+    seconds: float  #: this target's eigensolve plus its share of its batch's kernel
+
+
+class _Config(NamedTuple):
+    """Everything static of the kernel (hashable: one compiled kernel per config and shape)."""
+
+    method: object
+    k: int  # map size
+    k_map: int  # ZoomOut size
+    k_spec: int  # eigenpairs per shape
+    n_energies: int
+    n_landmarks: int  # 0: orientation term instead
+    chunk: int
+
+
+def _kernel(rep, items, *, cfg: _Config):
+    """All targets of a batch (leading axis of ``items``): map estimation and transfer.
+
+    One compiled program loops over the batch (``lax.map``): every target runs the very same
+    per-target computation, so its result does not depend on the batch it came in (one or
+    several processes give the same bits).  ``vmap`` over the batch hung XLA CPU in this
+    composition (jax 0.10: ZoomOut, the optimistix solve and the refinement's scan together)
+    and gains nothing on a CPU; the devices still take whole batches in parallel."""
+    return jax.lax.map(functools.partial(_one_target, rep, cfg=cfg), items)
+
+
+@functools.lru_cache(maxsize=64)
+def _kernel_for(cfg: _Config):
+    # one jitted function per config: it compiles once per bucket shape and batch size
+    return jax.jit(functools.partial(_kernel, cfg=cfg))
+
+
+def _run_sharded(cfg: _Config, replicated, stacked, m: int):
+    """The kernel on ``m`` stacked targets, the batch split over this process's devices.
+
+    As the engine (:func:`bsfjax.transfer` on stacked pairs): the batch is padded with copies
+    of its last target to a multiple of the device count and placed split along its leading
+    axis; GSPMD partitions the vmapped kernel without communication (each device computes
+    whole targets)."""
+    d = len(jax.local_devices())
+    if d > 1:
+        stacked = jax.tree.map(lambda x: shard_leading(pad_leading(x, d, "edge"), "items",
+                                                       local=True), stacked)
+    out = _kernel_for(cfg)(replicated, stacked)
+    return jax.tree.map(lambda x: np.asarray(x)[:m], out)  # host slicing: no compile
+
+
+def _one_target(rep, it, *, cfg: _Config):
+    dt = jnp.result_type(float)
+    k, km = cfg.k, cfg.k_map
+    # the pair's common unit-area factor: the source arrives at its own one, times a power of
+    # 4 per target (exact in floating point, as bsfjax.unit_area_pair)
+    r = it["ratio"]
+    src = Spectrum(rep["evals"] * r, rep["evecs"] * jnp.sqrt(r), rep["mass"] / r)
+    tgt = Spectrum(it["evals"], it["evecs"], it["mass"])
+
+    def descriptors(s: Spectrum, lm):
+        def w(landmarks):
+            return _wks_jit(s.evals[:k], s.evecs[:, :k], s.mass, None, None, landmarks, 7.0,
+                            n_energies=cfg.n_energies, area_normalize=True, scaled=True)
+        return w(None) if lm is None else jnp.concatenate([w(None), w(lm)], axis=1)
+
+    lm_m = it.get("landmarks_source")
+    lm_n = it.get("landmarks_target")
+    geom_m = geom_n = None
+    weights = FmapWeights()
+    if cfg.n_landmarks == 0:
+        geom_m = _Geometry(rep["faces"], rep["K"], rep["third_area"])
+        geom_n = _Geometry(it["faces"], it["K"], it["third_area"])
+        weights = FmapWeights(orient=ORIENT_WEIGHT)
+    sm = _cast(_Shape(src.evals[:k], src.evecs[:, :k], src.mass, descriptors(src, lm_m), geom_m),
+               dt)
+    sn = _cast(_Shape(tgt.evals[:k], tgt.evecs[:, :k], tgt.mass, descriptors(tgt, lm_n), geom_n),
+               dt)
+    pb = _setup(sm, sn, jnp.asarray(_weights_array(weights), dt), lap_kind="resolvent",
+                gamma=jnp.asarray(0.5, dt), normalize_descriptors=True, normalize_weights=True,
+                orient_sign=1.0)
+    rtol, atol = (1e-10, 1e-12) if dt == jnp.float64 else (1e-4, 1e-6)
+    C0 = _solve(pb, rtol=rtol, atol=atol, max_steps=8)
+    phi_m, phi_n = src.evecs.astype(dt), tgt.evecs.astype(dt)
+    mass_n = tgt.mass.astype(dt)
+    C_ref = C0
+    if km > k:  # ZoomOut k → k_map in steps of one, as bsfjax.zoomout's default
+        sizes = _size_schedule(k, km, 1, km - k)
+        C_ref = _zoomout_jit(C0, phi_m[:, :km], phi_n[:, :km], mass_n, sizes_n=sizes,
+                             sizes_m=sizes, chunk=cfg.chunk, adjoint=False)
+    p2p = _to_p2p(C_ref, phi_m[:, :km], phi_n[:, :km], cfg.chunk, False)
+    C = _from_p2p(p2p, phi_m[:, :k], phi_n[:, :k], mass_n)
+    energy = _energy(C, pb)
+    # the method, through the one engine's prepare / carry (as bsfjax.transfer)
+    method = cfg.method
+    full = getattr(method, "full_spectra", False)
+    two_k = isinstance(method, SpectralProjection) and method.factor == 2
+    pair = Pair(source=src if full or two_k else src.truncate(k),
+                target=tgt if full else tgt.truncate(k), C=C, p2p=p2p,
+                centers=rep.get("centers"), distances=rep.get("distances"))
+    F = rep["F"].astype(dt)
+    _, carry, _ = method.prepare(pair, F, k)
+    return {"values": carry(C), "p2p": p2p, "C": C, "energy": energy}
+
+
+# --------------------------------------------------------------------------- host side
+
+
+class _Target(NamedTuple):
+    index: int
+    mesh: Mesh
+    spectrum: Spectrum  # unit-area-pair scaled, float64
+    ratio: float
+    landmarks: tuple | None
+    seconds: float
+
+
+def _as_mesh(target) -> Mesh:
+    if isinstance(target, Mesh):
+        return target
+    return load_mesh(target)
+
+
+def _pad_rows(x: np.ndarray, n: int) -> np.ndarray:
+    pad = n - x.shape[0]
+    return x if pad == 0 else np.concatenate([x, np.zeros((pad,) + x.shape[1:], x.dtype)])
+
+
+def _geometry_arrays(mesh: Mesh, m_b: int) -> dict:
+    g = _geometry(mesh)
+    return {"faces": _pad_rows(g.faces, m_b), "K": _pad_rows(g.K, m_b),
+            "third_area": _pad_rows(g.third_area, m_b)}
+
+
+def _bucket_key(t: _Target, pad: bool, orient: bool):
+    n, m = t.mesh.n_vertices, t.mesh.n_faces
+    n_b = size_bucket(n) if pad else n
+    m_b = (size_bucket(m) if pad else m) if orient else 0
+    return n_b, m_b, 0 if t.landmarks is None else len(t.landmarks[0])
+
+
+def _item_arrays(t: _Target, n_b: int, m_b: int) -> dict:
+    s = t.spectrum
+    out = {"evals": np.asarray(s.evals), "evecs": _pad_rows(np.asarray(s.evecs), n_b),
+           "mass": _pad_rows(np.asarray(s.mass), n_b), "ratio": np.float64(t.ratio)}
+    if t.landmarks is not None:
+        out["landmarks_source"] = np.asarray(t.landmarks[0], np.int32)
+        out["landmarks_target"] = np.asarray(t.landmarks[1], np.int32)
+    else:
+        out.update(_geometry_arrays(t.mesh, m_b))
+    return out
+
+
+def _cast_tree(tree):
+    dt = jax.dtypes.canonicalize_dtype(jnp.float64)
+    return jax.tree.map(lambda x: np.asarray(x, np.int32 if np.issubdtype(np.asarray(x).dtype,
+                                                                          np.integer) else dt),
+                        tree)
+
+
+def _owned(indices: Sequence[int]) -> list[int]:
+    """The targets of this process: target ``i`` goes to global device ``i mod D``."""
+    devices = jax.devices()
+    me = jax.process_index()
+    return [i for j, i in enumerate(indices) if devices[j % len(devices)].process_index == me]
+
+
+def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels: bool = True,
+                        method="refined", k: int = 30, landmarks=None,
+                        threshold: float | None = None, batch_size: int = 4, pad: bool = True,
+                        n_energies: int = 100, n_bsf: float | int = 0.05, seed: int = 0,
+                        spectrum_cache: str | None = None,
+                        errors: str = "raise") -> Iterator[tuple[int, TargetTransfer | Exception]]:
+    """Transfer one segmentation (or functions) from ``source`` to every mesh of ``targets``.
+
+    Yields ``(index, result)`` as batches finish (grouped by size bucket, so not in order);
+    ``dict(transfer_collection(...))`` collects them.  Each result equals, up to float
+    round-off, :func:`bsfjax.estimate_map` (``k``, ZoomOut to ``2k``, the same landmarks or
+    the orientation term) followed by :func:`bsfjax.transfer_labels` with ``method``, as
+    ``bsfjax transfer`` runs them.
+
+    **Arguments:**
+
+    - ``source``: the source :class:`~bsfjax.Mesh` or its file.
+    - ``values``: ``(n_M,)`` int labels (``labels=True``) or ``(m, n_M)`` functions.
+    - ``targets``: meshes or mesh files (loaded one at a time; a collection may be larger than
+      memory).
+    - ``method``: as :func:`bsfjax.transfer_labels` (default ``"refined"``; the spectra then
+      have 100 eigenpairs, else ``2k``); ``"std2"`` is not supported here.
+    - ``landmarks``: ``None``, or a callable ``index → (source indices, target indices) or
+      None``, or a sequence with one such entry per target.
+    - ``threshold``: as :func:`bsfjax.transfer_labels`.
+    - ``batch_size``: targets per kernel call (vmapped; split over the devices).
+    - ``pad``: pad vertex and face counts to :func:`size_bucket` sizes (``False``: one
+      compilation per distinct count).
+    - ``spectrum_cache``: folder for the spectra (see :func:`bsfjax.spectrum`).
+    - ``errors``: ``"raise"``, or ``"report"``: a target that cannot be read or solved yields
+      its exception and the others go on.
+
+    Under ``jax.distributed`` each process yields only its own share of the targets (target
+    ``i`` belongs to the process that owns global device ``i mod D``).
+    """
+
+    if errors not in ("raise", "report"):
+        raise BSFError(f"errors must be 'raise' or 'report', got {errors!r}")
+    method = as_method(method)
+    if method.name == "std2":
+        raise BSFError("method 'std2' needs a 2k x 2k map: not supported by transfer_collection")
+    check_int(k, "k", 2)
+    check_int(batch_size, "batch_size", 1)
+    source = _as_mesh(source)
+    n_m = source.n_vertices
+    vals = np.asarray(values)
+    if labels:
+        if vals.shape != (n_m,):
+            raise BSFError(f"labels must have one entry per source vertex ({n_m}), got shape "
+                           f"{vals.shape}")
+        ids, codes = compact_labels(vals)
+        F = np.asarray(labels_to_indicators(codes, len(ids)), np.float64)
+    else:
+        F = np.asarray(vals, np.float64)
+        F = F[None] if F.ndim == 1 else F
+        if F.ndim != 2 or F.shape[1] != n_m or not np.all(np.isfinite(F)):
+            raise BSFError(f"values must be finite, of shape (n_source,) or (m, n_source) with "
+                           f"n_source = {n_m}, got {vals.shape}")
+    refined = isinstance(method, RefinedPullBack)
+    if threshold is None:
+        threshold = 0.0 if refined else 0.5
+    k_map = 2 * k
+    k_spec = max(k_map, REFINE_EIGENPAIRS) if getattr(method, "full_spectra", False) else k_map
+    if k_spec >= n_m:
+        raise BSFError(f"the source has {n_m} vertices: too few for {k_spec} eigenpairs")
+    src_spec = spectrum(source, k_spec, cache_dir=spectrum_cache)
+    src_unit, a0 = unit_area(src_spec)
+    rep = {"evals": np.asarray(src_unit.evals), "evecs": np.asarray(src_unit.evecs),
+           "mass": np.asarray(src_unit.mass), "F": F}
+    geom_src = _geometry(source)
+    rep_orient = {"faces": geom_src.faces, "K": geom_src.K, "third_area": geom_src.third_area}
+    if isinstance(method, (BSF, GeodesicBalls, SaturatedHeat)):
+        from ._sampling import farthest_point_sampling
+
+        rep["centers"] = np.asarray(farthest_point_sampling(source, n_bsf, seed=seed))
+        if isinstance(method, GeodesicBalls):
+            from ._geodesics import geodesic_distances
+
+            rep["distances"] = np.asarray(geodesic_distances(source, rep["centers"]),
+                                          np.float64) / np.sqrt(a0)
+    chunk = max(8, _DEFAULT_BUDGET // n_m)
+    area_m = float(np.sum(src_spec.mass))
+    lm_of = _landmark_lookup(landmarks)
+    pending: dict[tuple, list[_Target]] = {}
+
+    def prepare(i, target) -> _Target:
+        t = time.perf_counter()
+        mesh = _as_mesh(target)
+        if mesh.n_vertices <= k_spec:
+            raise BSFError(f"{mesh.name or f'target {i}'}: {mesh.n_vertices} vertices, too few "
+                           f"for {k_spec} eigenpairs")
+        lm = lm_of(i)
+        if lm is not None:
+            src_i, tgt_i = (np.asarray(x) for x in lm)
+            if src_i.ndim != 1 or src_i.shape != tgt_i.shape or src_i.size == 0:
+                raise BSFError(f"landmarks of target {i}: two lists of equal, non-zero length "
+                               f"expected, got {src_i.size} and {tgt_i.size}")
+            lm = (check_indices(src_i, "source landmarks", n_m),
+                  check_indices(tgt_i, "target landmarks", mesh.n_vertices))
+        spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
+        a = float(pow2_scale(np.sqrt(area_m * float(np.sum(spec.mass))), even=True))
+        scaled = Spectrum(np.asarray(spec.evals) * a, np.asarray(spec.evecs) * np.sqrt(a),
+                          np.asarray(spec.mass) / a)
+        return _Target(i, mesh, scaled, a / a0, lm, time.perf_counter() - t)
+
+    def run(key, batch: list[_Target]):
+        n_b, m_b, p = key
+        cfg = _Config(method, k, k_map, k_spec, n_energies, p, chunk)
+        replicated = dict(rep, **(rep_orient if p == 0 else {}))
+        items = [_item_arrays(t, n_b, m_b) for t in batch]
+        stacked = jax.tree.map(lambda *x: np.stack(x), *items)
+        t = time.perf_counter()
+        out = _run_sharded(cfg, _cast_tree(replicated), _cast_tree(stacked), len(batch))
+        share = (time.perf_counter() - t) / len(batch)
+        for j, tg in enumerate(batch):
+            n = tg.mesh.n_vertices
+            vals_j = out["values"][j][:, :n].astype(np.float64)
+            p2p = out["p2p"][j][:n].astype(np.int64)
+            mass = np.asarray(tg.spectrum.mass, np.float64)
+            lab = agree = conf = regime = None
+            share_un = 0.0
+            if labels:
+                best = vals_j.max(axis=0)
+                lab = np.where(best < threshold, -1, ids[vals_j.argmax(axis=0)].astype(np.int64))
+                share_un = float(np.sum(mass * (lab < 0)) / np.sum(mass))
+                agree = float(np.sum(mass * (vals[p2p] == lab)) / np.sum(mass))
+                conf = float(np.sum(mass * best) / np.sum(mass))
+                regime = _regime(agree, conf) if refined else None
+            yield tg.index, TargetTransfer(
+                labels=lab, values=vals_j, p2p=p2p, C=out["C"][j].astype(np.float64),
+                map_energy=float(out["energy"][j]), unassigned_share=share_un,
+                agreement=agree, confidence=conf, regime=regime, n_vertices=n, mass=mass,
+                seconds=tg.seconds + share)
+
+    targets = list(targets)
+    for i in _owned(range(len(targets))):
+        try:
+            tg = prepare(i, targets[i])
+        except (BSFError, ValueError, OSError) as exc:
+            if errors == "raise":
+                raise
+            yield i, exc
+            continue
+        key = _bucket_key(tg, pad, tg.landmarks is None)
+        pending.setdefault(key, []).append(tg)
+        if len(pending[key]) == batch_size:
+            yield from run(key, pending.pop(key))
+    for key in list(pending):
+        yield from run(key, pending.pop(key))
+
+
+def _landmark_lookup(landmarks) -> Callable[[int], tuple | None]:
+    if landmarks is None:
+        return lambda i: None
+    if callable(landmarks):
+        return landmarks
+    seq = list(landmarks)
+    return lambda i: seq[i] if i < len(seq) else None
+
