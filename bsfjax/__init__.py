@@ -15,6 +15,7 @@ owns each step, see ``docs/architecture.md``)::
     transfer    METHODS, BSF, ..., Pair, transfer, transfer_pairs             _methods, _transfer
     maps        wks, hks, estimate_fmap, zoomout, fmap_to_p2p, estimate_map   _fmap, _estimation, ...
     mesh level  transfer_values, transfer_labels                              _highlevel
+    collection  transfer_collection (one source to many targets, batched)    _collection
     metrics     relative_error, labels_to_indicators, random_indicators       _metrics, _indicators
     experiments bsfjax.experiments (the paper's tables and figures), bsfjax.plot, bsfjax.cli
 """
@@ -71,6 +72,7 @@ from ._estimation import FmapWeights, estimate_fmap, fmap_energy
 # mesh-level entry points
 from ._highlevel import (LabelTransfer, MapEstimate, estimate_map, transfer_labels,
                          transfer_values)
+from ._collection import TargetTransfer, size_bucket, transfer_collection
 
 # metrics and test functions
 from ._metrics import relative_error
@@ -108,6 +110,7 @@ __all__ = [
     "FmapWeights", "estimate_fmap", "fmap_energy",
     # mesh level
     "MapEstimate", "estimate_map", "LabelTransfer", "transfer_values", "transfer_labels",
+    "transfer_collection", "TargetTransfer", "size_bucket",
     # metrics
     "relative_error", "indicators_to_labels", "labels_to_indicators", "random_indicators",
 ]

@@ -43,7 +43,7 @@ from ._highlevel import ORIENT_WEIGHT, _regime
 from ._indicators import labels_to_indicators
 from ._mesh import Mesh, load_mesh
 from ._methods import BSF, GeodesicBalls, Pair, RefinedPullBack, SaturatedHeat, \
-    SpectralProjection, as_method
+    SpectralProjection, as_method, method_name
 from ._refine import REFINE_EIGENPAIRS
 from ._spectrum import Spectrum, spectrum, unit_area
 from ._validate import check_indices, check_int, compact_labels, pow2_scale
@@ -282,7 +282,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     if errors not in ("raise", "report"):
         raise BSFError(f"errors must be 'raise' or 'report', got {errors!r}")
     method = as_method(method)
-    if method.name == "std2":
+    if method_name(method) == "std2":
         raise BSFError("method 'std2' needs a 2k x 2k map: not supported by transfer_collection")
     check_int(k, "k", 2)
     check_int(batch_size, "batch_size", 1)

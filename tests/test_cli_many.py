@@ -1,0 +1,169 @@
+"""``bsfjax transfer SOURCE TARGET... --out-dir``: many targets, resume, errors, processes."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import bsfjax
+from bsfjax._highlevel import REGIMES
+from bsfjax.cli import main
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("many")
+    small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
+    bsfjax.save_mesh(d / "src.ply", small.source)
+    np.savetxt(d / "labels.txt", small.labels, fmt="%d")
+    (d / "tg").mkdir()
+    bsfjax.save_mesh(d / "tg" / "t506.ply", small.target)
+    bsfjax.save_mesh(d / "tg" / "t2018.off", large.target)
+    (d / "truth").mkdir()
+    np.savetxt(d / "truth" / "t506.txt", small.labels[small.p2p], fmt="%d")
+    (d / "bad").mkdir()
+    (d / "bad" / "broken.off").write_text("OFF\n3 1 0\n0 0 0\n")  # truncated
+    return d
+
+
+def _argv(d, out, *targets, extra=()):
+    return ["transfer", str(d / "src.ply"), *[str(t) for t in targets], "--labels",
+            str(d / "labels.txt"), "--out-dir", str(out), "-k", "10", "--no-progress", *extra]
+
+
+@pytest.fixture(scope="module")
+def one_process(files):
+    """One run over the two good targets: the reference of the tests below."""
+    out = files / "one"
+    assert main(_argv(files, out, files / "tg")) == 0
+    return out
+
+
+def test_writes_every_target_and_a_summary(files, one_process):
+    summary = json.loads((one_process / "summary.json").read_text())["targets"]
+    assert [r["target"].rsplit("/", 1)[-1] for r in summary] == ["t2018.off", "t506.ply"]
+    for r, n in zip(summary, (2018, 506)):
+        assert r["status"] == "ok" and r["vertices"] == n
+        assert 0 <= r["unassigned_share"] <= 0.01 and r["regime"] in REGIMES
+        assert np.isfinite(r["map_energy"]) and r["seconds"] > 0
+        labels = np.loadtxt(one_process / f"{r['target'].rsplit('/', 1)[-1].split('.')[0]}.txt")
+        assert labels.shape == (n,)
+
+
+def test_truth_a_bad_target_and_resume(files, one_process, capsys):
+    out = files / "run"
+    argv = _argv(files, out, files / "tg" / "t506.ply", files / "bad" / "broken.off",
+                 extra=["--truth-dir", str(files / "truth"), "--mesh-out-dir", str(out / "ply")])
+    assert main(argv) == 1  # the bad target is reported, the other one finishes
+    err = capsys.readouterr().err
+    assert "broken.off: error:" in err
+    rows = {r["target"].rsplit("/", 1)[-1]: r
+            for r in json.loads((out / "summary.json").read_text())["targets"]}
+    assert rows["broken.off"]["status"] == "error" and "broken.off" in rows["broken.off"]["error"]
+    assert rows["t506.ply"]["accuracy"] > 0.9
+    assert (out / "ply" / "t506.ply").is_file() and not (out / "broken.txt").exists()
+    # the same labels as the run without the bad target
+    np.testing.assert_array_equal(np.loadtxt(out / "t506.txt"),
+                                  np.loadtxt(one_process / "t506.txt"))
+    # rerun: the complete target is skipped (its file untouched), only the bad one is retried
+    before = (out / "t506.txt").stat().st_mtime_ns
+    assert main(argv) == 1
+    assert "1 complete (skipped), 1 to run" in capsys.readouterr().err
+    assert (out / "t506.txt").stat().st_mtime_ns == before
+    rows = {r["target"].rsplit("/", 1)[-1]: r
+            for r in json.loads((out / "summary.json").read_text())["targets"]}
+    assert rows["t506.ply"]["status"] == "ok" and "accuracy" in rows["t506.ply"]  # kept
+    # a missing output (a run killed before it) is computed again; --overwrite redoes all
+    (out / "ply" / "t506.ply").unlink()
+    assert main(argv[:3] + argv[4:]) == 0  # without the bad target
+    assert "0 complete (skipped), 1 to run" in capsys.readouterr().err
+    assert (out / "ply" / "t506.ply").is_file()
+    assert main(argv[:3] + argv[4:] + ["--overwrite"]) == 0
+    assert "0 complete (skipped), 1 to run" in capsys.readouterr().err
+    assert (out / "t506.txt").stat().st_mtime_ns > before
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_two_processes_write_what_one_process_writes(files, one_process):
+    out = files / "two"
+    port = _free_port()
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    procs = [subprocess.Popen([sys.executable, "-m", "bsfjax.cli",
+                               *_argv(files, out, files / "tg"),
+                               "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",
+                               "--process-id", str(i)], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for i in range(2)]
+    errs = [p.communicate(timeout=600)[1] for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], errs
+    assert "on 2 processes" in errs[0] and "wrote 1 targets" in errs[0] + errs[1]
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in one_process.iterdir())
+    for name in ("t506.txt", "t2018.txt"):
+        assert (out / name).read_bytes() == (one_process / name).read_bytes()
+    drop = lambda rows: [{k: v for k, v in r.items() if k != "seconds"} for r in rows]  # noqa: E731
+    assert drop(json.loads((out / "summary.json").read_text())["targets"]) == \
+        drop(json.loads((one_process / "summary.json").read_text())["targets"])
+
+
+@pytest.mark.parametrize("extra, match", [
+    (["--out", "x.txt"], "give --out FILE .* or --out-dir DIR"),
+    (["--landmarks", "1:1"], "--landmarks cannot be used with --out-dir DIR"),
+    (["--map", "p2p", "m.txt"], "with --out-dir the map is estimated"),
+    (["--batch-size", "0"], "--batch-size must be an integer >= 1"),
+    (["--coordinator", "127.0.0.1:1"], "go together"),
+    (["--truth-dir", "nowhere"], "--truth-dir nowhere: no such folder"),
+])
+def test_bad_options_are_one_line(files, tmp_path, capsys, extra, match):
+    argv = _argv(files, tmp_path / "o", files / "tg", extra=extra)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "Traceback" not in err
+    import re
+
+    assert re.search(match, err), err
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_bad_targets_and_landmark_files(files, tmp_path, capsys):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    for sub in ("a", "b"):
+        (tmp_path / sub / "same.off").write_text("x")
+    (tmp_path / "empty").mkdir()
+    lm = tmp_path / "lm.json"
+    lm.write_text(json.dumps({"t506.ply": [[1, 2], [3]]}))
+    cases = [
+        ([tmp_path / "a", tmp_path / "b"], [], "same name 'same'"),
+        ([tmp_path / "empty"], [], "no mesh files"),
+        ([str(tmp_path / "*.none")], [], "matches no file"),
+        ([files / "tg"], ["--landmarks-file", str(lm)], "entry 't506.ply' must be"),
+        ([files / "tg"], ["--landmarks-file", str(tmp_path / "a" / "same.off")],
+         "cannot read JSON"),
+    ]
+    for targets, extra, match in cases:
+        argv = _argv(files, tmp_path / "o", *targets, extra=extra)
+        assert main(argv) == 2, targets
+        err = capsys.readouterr().err
+        assert match in err, err
+
+
+def test_landmarks_file_maps_names_and_stems_to_targets(tmp_path):
+    from pathlib import Path
+
+    from bsfjax._cli_many import _read_landmarks_file
+    from bsfjax.cli import CLIError
+
+    lm = tmp_path / "lm.json"
+    lm.write_text(json.dumps({"b.off": [[1, 2], [3, 4]], "c": [[5], [6]], "other.ply": [[0], [0]]}))
+    got = _read_landmarks_file(str(lm), [Path("x/a.ply"), Path("y/b.off"), Path("c.obj")], CLIError)
+    assert got == {1: ([1, 2], [3, 4]), 2: ([5], [6])}

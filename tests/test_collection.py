@@ -1,0 +1,109 @@
+"""transfer_collection: size buckets, padding, and equality with the one-pair path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import bsfjax
+from bsfjax import BSFError, size_bucket, transfer_collection
+from bsfjax._collection import BUCKET_FACTORS
+
+
+def test_size_bucket_is_a_small_bounded_set():
+    prev = 0
+    for n in range(1, 70_000, 37):
+        b = size_bucket(n)
+        assert b >= n and b >= prev  # covers n, monotone
+        assert any(b == c << j for c in BUCKET_FACTORS for j in range(20))  # c · 2^j
+        if n > 64:
+            assert b <= 1.5 * n  # at most 50 % padding
+        prev = b
+    # a 3.4K–6.9K collection meets at most three sizes: few compilations
+    assert len({size_bucket(n) for n in range(3400, 6900)}) <= 3
+
+
+@pytest.fixture(scope="module")
+def collection():
+    """Source: the example source (506 V); targets: the example target at two resolutions
+    (506 and 2018 V: two buckets), the second with landmarks (its own bucket key)."""
+    small = bsfjax.example_pair(levels=1)
+    large = bsfjax.example_pair(levels=2)
+    lm_src = [0, 100, 200, 300]
+    lm = {1: (lm_src, lm_src)}  # levels keep the coarse vertices first: vertex i ↔ vertex i
+    targets = [small.target, large.target]
+    kw = dict(method="refined", k=10, landmarks=lambda i: lm.get(i))
+    padded = dict(transfer_collection(small.source, small.labels, targets, **kw))
+    # unpadded: the first target (506 → bucket 512, orientation term) is enough to compare
+    unpadded = dict(transfer_collection(small.source, small.labels, targets[:1], pad=False, **kw))
+    return small, targets, lm, padded, unpadded
+
+
+def test_padded_targets_give_the_unpadded_results(collection):
+    _, targets, _, padded, unpadded = collection
+    assert size_bucket(targets[0].n_vertices) > targets[0].n_vertices  # really padded
+    for i, t in enumerate(targets[:1]):
+        a, b = padded[i], unpadded[i]
+        assert a.labels.shape == (t.n_vertices,) and a.p2p.shape == (t.n_vertices,)
+        np.testing.assert_array_equal(a.labels, b.labels)
+        np.testing.assert_array_equal(a.p2p, b.p2p)
+        np.testing.assert_allclose(a.C, b.C, atol=1e-6)
+        np.testing.assert_allclose(a.map_energy, b.map_energy, rtol=1e-5)
+
+
+def test_equals_estimate_map_then_transfer_labels(collection):
+    """Each target's result is the one-pair path's (bsfjax transfer's)."""
+    small, targets, lm, padded, _ = collection
+    sm = bsfjax.spectrum(small.source, 100)
+    for i, t in enumerate(targets):
+        sn = bsfjax.spectrum(t, 100)
+        est = bsfjax.estimate_map(sm.truncate(20), sn.truncate(20), k=10, refine_to=20,
+                                  landmarks=lm.get(i), source_mesh=small.source, target_mesh=t)
+        res = bsfjax.transfer_labels(sm, sn, small.labels, C=est.C, p2p=est.p2p,
+                                     mesh=small.source)
+        np.testing.assert_array_equal(padded[i].p2p, est.p2p)
+        np.testing.assert_allclose(padded[i].C, est.C, atol=1e-4)
+        np.testing.assert_array_equal(padded[i].labels, res.labels)
+        assert padded[i].regime == res.regime
+        assert padded[i].unassigned_share == pytest.approx(res.unassigned_share, abs=1e-6)
+        assert padded[i].agreement == pytest.approx(res.agreement, abs=1e-6)
+    # the pair is the same shape in another pose: the transfer is nearly right
+    truth = small.labels[small.p2p]
+    mass = np.asarray(bsfjax.spectrum(targets[0], 2).mass)
+    assert np.sum(mass * (padded[0].labels == truth)) / mass.sum() > 0.9
+
+
+def test_errors_are_reported_per_target_or_raised(tmp_path):
+    small = bsfjax.example_pair(levels=1)
+    bad = tmp_path / "bad.off"
+    bad.write_text("not a mesh\n")
+    out = list(transfer_collection(small.source, small.labels, [bad], method="p2p", k=10,
+                                   errors="report"))
+    assert len(out) == 1 and out[0][0] == 0 and isinstance(out[0][1], ValueError)
+    assert "bad.off" in str(out[0][1])
+    with pytest.raises(ValueError, match="bad.off"):
+        list(transfer_collection(small.source, small.labels, [bad], method="p2p", k=10))
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(method="std2"), "std2"),
+    (dict(k=1), "k"),
+    (dict(batch_size=0), "batch_size"),
+    (dict(errors="ignore"), "errors"),
+])
+def test_bad_options(kwargs, match):
+    small = bsfjax.example_pair(levels=1)
+    with pytest.raises(BSFError, match=match):
+        list(transfer_collection(small.source, small.labels, [small.target], **kwargs))
+
+
+def test_bad_values_and_landmarks():
+    small = bsfjax.example_pair(levels=1)
+    with pytest.raises(BSFError, match="one entry per source vertex"):
+        list(transfer_collection(small.source, small.labels[:-1], [small.target]))
+    out = list(transfer_collection(small.source, small.labels, [small.target], k=10,
+                                   landmarks=[([0, 1], [0])], errors="report"))
+    assert isinstance(out[0][1], BSFError) and "equal" in str(out[0][1])
+    out = list(transfer_collection(small.source, small.labels, [small.target], k=10,
+                                   landmarks=[([0], [10**6])], errors="report"))
+    assert isinstance(out[0][1], BSFError) and "target landmarks" in str(out[0][1])
