@@ -1,7 +1,7 @@
 """``bsfjax transfer SOURCE TARGET [TARGET ...] --out-dir DIR``: one source to many targets.
 
 Targets are files, folders (their mesh files) or glob patterns.  Each target's result is
-written as soon as its batch finishes, atomically: ``DIR/<stem>.txt`` (and
+written as soon as it is computed, atomically: ``DIR/<stem>.txt`` (and
 ``MESH_DIR/<stem>.ply`` with ``--mesh-out-dir``); ``DIR/summary.json`` lists every target.
 A rerun skips the targets whose outputs are complete (unless ``--overwrite``), so an
 interrupted run resumes; a target that cannot be read or solved is reported and skipped, and
@@ -150,7 +150,7 @@ def cmd_transfer_many(args, error) -> int:
     results = transfer_collection(
         source, values, [targets[i] for i in todo], labels=labels, method=args.method, k=args.k,
         landmarks=lambda j: landmarks.get(todo[j]), threshold=args.threshold,
-        batch_size=args.batch_size, errors="report", spectrum_cache=args.spectrum_cache)
+        errors="report", spectrum_cache=args.spectrum_cache)
     mine = sum(1 for j in range(len(todo))
                if jax.devices()[j % jax.device_count()].process_index == jax.process_index())
     bar = tqdm(total=mine, desc="targets", unit="target", disable=args.no_progress,

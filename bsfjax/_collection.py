@@ -12,8 +12,8 @@ through **one jitted, vmapped kernel** per group of equal shapes:
   rows, extra faces zero area.  Every stage weighs vertices by mass or uses the target's
   vertices only as queries, so the padded target gives the unpadded results (tested); the
   kernel compiles once per bucket, not once per vertex count.
-- **devices**: a batch of targets is split over this process's JAX devices
-  (:func:`bsfjax._devices.map_over_devices`);
+- **devices**: a batch of targets is split over this process's JAX devices, each running
+  its slice at the same time;
 - **processes**: under ``jax.distributed`` target ``i`` belongs to the process owning global
   device ``i mod D``, so the processes share the targets without any communication, and a
   target's result does not depend on which process or batch computed it.
@@ -34,7 +34,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._descriptors import _wks_jit
-from ._devices import pad_leading, shard_leading
 from ._errors import BSFError
 from ._estimation import FmapWeights, _cast, _energy, _geometry, _Geometry, _setup, _Shape, \
     _solve, _weights_array
@@ -95,39 +94,30 @@ class _Config(NamedTuple):
     chunk: int
 
 
-def _kernel(rep, items, *, cfg: _Config):
-    """All targets of a batch (leading axis of ``items``): map estimation and transfer.
-
-    One compiled program loops over the batch (``lax.map``): every target runs the very same
-    per-target computation, so its result does not depend on the batch it came in (one or
-    several processes give the same bits).  ``vmap`` over the batch hung XLA CPU in this
-    composition (jax 0.10: ZoomOut, the optimistix solve and the refinement's scan together)
-    and gains nothing on a CPU; the devices still take whole batches in parallel."""
-    return jax.lax.map(functools.partial(_one_target, rep, cfg=cfg), items)
-
-
 @functools.lru_cache(maxsize=64)
 def _kernel_for(cfg: _Config):
-    # one jitted function per config: it compiles once per bucket shape and batch size
-    return jax.jit(functools.partial(_kernel, cfg=cfg))
+    """The jitted per-target kernel of a config (one function object per config, so that it
+    compiles once per bucket shape and device)."""
+    return jax.jit(functools.partial(_one_target, cfg=cfg))
 
 
-def _run_sharded(cfg: _Config, replicated, stacked, m: int):
-    """The kernel on ``m`` stacked targets, the batch split over this process's devices.
+def _dispatch(cfg: _Config, replicated: list, items: list) -> list:
+    """Run the kernel on up to ``d`` targets of one bucket, target ``i`` on local device ``i``.
 
-    As the engine (:func:`bsfjax.transfer` on stacked pairs): the batch is padded with copies
-    of its last target to a multiple of the device count and placed split along its leading
-    axis; GSPMD partitions the vmapped kernel without communication (each device computes
-    whole targets)."""
-    d = len(jax.local_devices())
-    if d > 1:
-        stacked = jax.tree.map(lambda x: shard_leading(pad_leading(x, d, "edge"), "items",
-                                                       local=True), stacked)
-    out = _kernel_for(cfg)(replicated, stacked)
-    return jax.tree.map(lambda x: np.asarray(x)[:m], out)  # host slicing: no compile
+    Every call is dispatched before any result is awaited, so the devices compute their
+    targets at the same time (targets are independent: no communication).  Not ``vmap`` over
+    the targets: vmapping this program (ZoomOut, the optimistix solve and the refinement's
+    scan together) hung XLA CPU (jax 0.10), and a CPU gains nothing from it; not a GSPMD or
+    ``shard_map`` program either: ``shard_map`` trips lineax's structure check inside the
+    estimation's solve.  ``replicated[i]``: the source arrays already on device ``i``."""
+    devices = jax.local_devices()
+    out = [_kernel_for(cfg)(replicated[i], jax.device_put(it, devices[i]))
+           for i, it in enumerate(items)]
+    return [jax.tree.map(np.asarray, o) for o in out]
 
 
 def _one_target(rep, it, *, cfg: _Config):
+    """Map estimation and transfer for one (padded) target ``it``; ``rep``: the source."""
     dt = jnp.result_type(float)
     k, km = cfg.k, cfg.k_map
     # the pair's common unit-area factor: the source arrives at its own one, times a power of
@@ -245,7 +235,7 @@ def _owned(indices: Sequence[int]) -> list[int]:
 
 def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels: bool = True,
                         method="refined", k: int = 30, landmarks=None,
-                        threshold: float | None = None, batch_size: int = 4, pad: bool = True,
+                        threshold: float | None = None, pad: bool = True,
                         n_energies: int = 100, n_bsf: float | int = 0.05, seed: int = 0,
                         spectrum_cache: str | None = None,
                         errors: str = "raise") -> Iterator[tuple[int, TargetTransfer | Exception]]:
@@ -268,7 +258,6 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     - ``landmarks``: ``None``, or a callable ``index → (source indices, target indices) or
       None``, or a sequence with one such entry per target.
     - ``threshold``: as :func:`bsfjax.transfer_labels`.
-    - ``batch_size``: targets per kernel call (vmapped; split over the devices).
     - ``pad``: pad vertex and face counts to :func:`size_bucket` sizes (``False``: one
       compilation per distinct count).
     - ``spectrum_cache``: folder for the spectra (see :func:`bsfjax.spectrum`).
@@ -285,7 +274,6 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     if method_name(method) == "std2":
         raise BSFError("method 'std2' needs a 2k x 2k map: not supported by transfer_collection")
     check_int(k, "k", 2)
-    check_int(batch_size, "batch_size", 1)
     source = _as_mesh(source)
     n_m = source.n_vertices
     vals = np.asarray(values)
@@ -348,19 +336,23 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                           np.asarray(spec.mass) / a)
         return _Target(i, mesh, scaled, a / a0, lm, time.perf_counter() - t)
 
+    devices = jax.local_devices()
+    on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
+
     def run(key, batch: list[_Target]):
         n_b, m_b, p = key
         cfg = _Config(method, k, k_map, k_spec, n_energies, p, chunk)
-        replicated = dict(rep, **(rep_orient if p == 0 else {}))
-        items = [_item_arrays(t, n_b, m_b) for t in batch]
-        stacked = jax.tree.map(lambda *x: np.stack(x), *items)
+        if p not in on_device:
+            src_arrays = _cast_tree(dict(rep, **(rep_orient if p == 0 else {})))
+            on_device[p] = [jax.device_put(src_arrays, dev) for dev in devices]
         t = time.perf_counter()
-        out = _run_sharded(cfg, _cast_tree(replicated), _cast_tree(stacked), len(batch))
+        out = _dispatch(cfg, on_device[p], [_cast_tree(_item_arrays(tg, n_b, m_b))
+                                            for tg in batch])
         share = (time.perf_counter() - t) / len(batch)
         for j, tg in enumerate(batch):
             n = tg.mesh.n_vertices
-            vals_j = out["values"][j][:, :n].astype(np.float64)
-            p2p = out["p2p"][j][:n].astype(np.int64)
+            vals_j = out[j]["values"][:, :n].astype(np.float64)
+            p2p = out[j]["p2p"][:n].astype(np.int64)
             mass = np.asarray(tg.spectrum.mass, np.float64)
             lab = agree = conf = regime = None
             share_un = 0.0
@@ -372,8 +364,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 conf = float(np.sum(mass * best) / np.sum(mass))
                 regime = _regime(agree, conf) if refined else None
             yield tg.index, TargetTransfer(
-                labels=lab, values=vals_j, p2p=p2p, C=out["C"][j].astype(np.float64),
-                map_energy=float(out["energy"][j]), unassigned_share=share_un,
+                labels=lab, values=vals_j, p2p=p2p, C=out[j]["C"].astype(np.float64),
+                map_energy=float(out[j]["energy"]), unassigned_share=share_un,
                 agreement=agree, confidence=conf, regime=regime, n_vertices=n, mass=mass,
                 seconds=tg.seconds + share)
 
@@ -388,7 +380,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             continue
         key = _bucket_key(tg, pad, tg.landmarks is None)
         pending.setdefault(key, []).append(tg)
-        if len(pending[key]) == batch_size:
+        if len(pending[key]) == len(devices):  # one target per device
             yield from run(key, pending.pop(key))
     for key in list(pending):
         yield from run(key, pending.pop(key))

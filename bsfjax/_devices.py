@@ -25,10 +25,9 @@ def n_devices() -> int:
 
 
 @functools.lru_cache(maxsize=8)
-def device_mesh(axis: str, local: bool = False) -> Mesh:
-    """A 1-D mesh over all devices of the default backend (``local``: this process's only,
-    under ``jax.distributed``), named ``axis``."""
-    return Mesh(np.asarray(jax.local_devices() if local else jax.devices()), (axis,))
+def device_mesh(axis: str) -> Mesh:
+    """A 1-D mesh over all devices of the default backend, named ``axis``."""
+    return Mesh(np.asarray(jax.devices()), (axis,))
 
 
 def pad_leading(x, multiple: int, mode: str = "zeros"):
@@ -42,10 +41,10 @@ def pad_leading(x, multiple: int, mode: str = "zeros"):
     return jnp.concatenate([x, fill], axis=0)
 
 
-def shard_leading(x, axis: str, local: bool = False):
-    """Place ``x`` with axis 0 split across :func:`device_mesh` (``axis``, ``local``)."""
+def shard_leading(x, axis: str):
+    """Place ``x`` with axis 0 split across :func:`device_mesh` (``axis``)."""
     spec = PartitionSpec(axis, *([None] * (jnp.ndim(x) - 1)))
-    return jax.device_put(x, NamedSharding(device_mesh(axis, local), spec))
+    return jax.device_put(x, NamedSharding(device_mesh(axis), spec))
 
 
 def map_over_devices(fn, replicated, per_item, m: int):

@@ -72,8 +72,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth-dir", help="--out-dir: folder of <target name>.txt/.npy ground "
                                        "truths; summary.json reports each accuracy")
     p.add_argument("--overwrite", action="store_true", help="--out-dir: recompute complete outputs")
-    p.add_argument("--batch-size", type=int, default=4, help="--out-dir: targets per batch "
-                   "(one vmapped kernel call, split over the devices; default 4)")
     p.add_argument("--spectrum-cache", help="folder caching the eigenbases between runs")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--coordinator", help="--out-dir on several processes (jax.distributed): "
@@ -409,7 +407,7 @@ def _cmd_spectrum(args) -> int:
 #: Options whose value may start with "-" (a negative number, or landmarks "-1,2:3,4"):
 #: argparse would take such a value for an option and answer with its usage text.
 _VALUE_OPTIONS = ("--landmarks", "--seed", "--functions", "--pairs", "--levels", "-k", "--k",
-                  "--threshold", "--batch-size", "--num-processes", "--process-id")
+                  "--threshold", "--num-processes", "--process-id")
 
 
 def _join_option_values(argv: list[str]) -> list[str]:
@@ -450,8 +448,6 @@ def _check_transfer_form(args) -> None:
     if bad:
         form = "--out FILE" if args.out is not None else "--out-dir DIR"
         raise CLIError(f"{', '.join(bad)} cannot be used with {form}")
-    if args.batch_size < 1:
-        raise CLIError(f"--batch-size must be an integer >= 1, got {args.batch_size}")
 
 
 def _check_options(args) -> None:

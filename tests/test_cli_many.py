@@ -39,16 +39,17 @@ def _argv(d, out, *targets, extra=()):
 
 @pytest.fixture(scope="module")
 def one_process(files):
-    """One run over the two good targets: the reference of the tests below."""
+    """One run over the good targets (a folder and a file): the reference of the tests below."""
     out = files / "one"
-    assert main(_argv(files, out, files / "tg")) == 0
+    assert main(_argv(files, out, files / "tg", files / "src.ply")) == 0
     return out
 
 
 def test_writes_every_target_and_a_summary(files, one_process):
     summary = json.loads((one_process / "summary.json").read_text())["targets"]
-    assert [r["target"].rsplit("/", 1)[-1] for r in summary] == ["t2018.off", "t506.ply"]
-    for r, n in zip(summary, (2018, 506)):
+    assert [r["target"].rsplit("/", 1)[-1] for r in summary] == ["t2018.off", "t506.ply",
+                                                                  "src.ply"]
+    for r, n in zip(summary, (2018, 506, 506)):
         assert r["status"] == "ok" and r["vertices"] == n
         assert 0 <= r["unassigned_share"] <= 0.01 and r["regime"] in REGIMES
         assert np.isfinite(r["map_energy"]) and r["seconds"] > 0
@@ -96,19 +97,24 @@ def _free_port() -> int:
 
 
 def test_two_processes_write_what_one_process_writes(files, one_process):
+    """jax.distributed on localhost (gloo), two processes of two CPU devices each: target j
+    goes to global device j mod 4, so process 0 runs two targets (one on each of its devices)
+    and process 1 one; the files are those of the one-process run, bit for bit."""
     out = files / "two"
     port = _free_port()
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    env = dict(os.environ, JAX_PLATFORMS="cpu",
+               XLA_FLAGS="--xla_force_host_platform_device_count=2")
     procs = [subprocess.Popen([sys.executable, "-m", "bsfjax.cli",
-                               *_argv(files, out, files / "tg"),
+                               *_argv(files, out, files / "tg", files / "src.ply"),
                                "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",
                                "--process-id", str(i)], env=env, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True) for i in range(2)]
     errs = [p.communicate(timeout=600)[1] for p in procs]
     assert [p.returncode for p in procs] == [0, 0], errs
-    assert "on 2 processes" in errs[0] and "wrote 1 targets" in errs[0] + errs[1]
+    assert "on 2 processes" in errs[0]
+    assert "wrote 2 targets" in errs[0] and "wrote 1 targets" in errs[1], errs
     assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in one_process.iterdir())
-    for name in ("t506.txt", "t2018.txt"):
+    for name in ("t506.txt", "t2018.txt", "src.txt"):
         assert (out / name).read_bytes() == (one_process / name).read_bytes()
     drop = lambda rows: [{k: v for k, v in r.items() if k != "seconds"} for r in rows]  # noqa: E731
     assert drop(json.loads((out / "summary.json").read_text())["targets"]) == \
@@ -119,7 +125,6 @@ def test_two_processes_write_what_one_process_writes(files, one_process):
     (["--out", "x.txt"], "give --out FILE .* or --out-dir DIR"),
     (["--landmarks", "1:1"], "--landmarks cannot be used with --out-dir DIR"),
     (["--map", "p2p", "m.txt"], "with --out-dir the map is estimated"),
-    (["--batch-size", "0"], "--batch-size must be an integer >= 1"),
     (["--coordinator", "127.0.0.1:1"], "go together"),
     (["--truth-dir", "nowhere"], "--truth-dir nowhere: no such folder"),
 ])

@@ -88,7 +88,6 @@ def test_errors_are_reported_per_target_or_raised(tmp_path):
 @pytest.mark.parametrize("kwargs, match", [
     (dict(method="std2"), "std2"),
     (dict(k=1), "k"),
-    (dict(batch_size=0), "batch_size"),
     (dict(errors="ignore"), "errors"),
 ])
 def test_bad_options(kwargs, match):
