@@ -79,7 +79,9 @@ class TargetTransfer(NamedTuple):
     regime: str | None  #: ``"refined"`` only: see :data:`bsfjax.REGIMES`
     n_vertices: int
     mass: np.ndarray  #: ``(n_N,)`` vertex areas of the target (relative: for area shares)
-    seconds: float  #: this target's eigensolve plus its share of its batch's kernel
+    #: this target's eigensolve plus its share of the time its group's kernel was dispatched
+    #: and awaited (the kernel runs while the next target's eigensolve does)
+    seconds: float
 
 
 class _Config(NamedTuple):
@@ -111,9 +113,8 @@ def _dispatch(cfg: _Config, replicated: list, items: list) -> list:
     ``shard_map`` program either: ``shard_map`` trips lineax's structure check inside the
     estimation's solve.  ``replicated[i]``: the source arrays already on device ``i``."""
     devices = jax.local_devices()
-    out = [_kernel_for(cfg)(replicated[i], jax.device_put(it, devices[i]))
-           for i, it in enumerate(items)]
-    return [jax.tree.map(np.asarray, o) for o in out]
+    return [_kernel_for(cfg)(replicated[i], jax.device_put(it, devices[i]))
+            for i, it in enumerate(items)]
 
 
 def _one_target(rep, it, *, cfg: _Config):
@@ -339,7 +340,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
 
-    def run(key, batch: list[_Target]):
+    def launch(key, batch: list[_Target]):
+        """Dispatch a group (not awaited: the next target's eigensolve runs meanwhile)."""
         n_b, m_b, p = key
         cfg = _Config(method, k, k_map, k_spec, n_energies, p, chunk)
         if p not in on_device:
@@ -348,7 +350,13 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         t = time.perf_counter()
         out = _dispatch(cfg, on_device[p], [_cast_tree(_item_arrays(tg, n_b, m_b))
                                             for tg in batch])
-        share = (time.perf_counter() - t) / len(batch)
+        return batch, out, time.perf_counter() - t
+
+    def finish(launched):
+        batch, out, seconds = launched
+        t = time.perf_counter()
+        out = [jax.tree.map(np.asarray, o) for o in out]
+        share = (seconds + time.perf_counter() - t) / len(batch)
         for j, tg in enumerate(batch):
             n = tg.mesh.n_vertices
             vals_j = out[j]["values"][:, :n].astype(np.float64)
@@ -370,6 +378,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 seconds=tg.seconds + share)
 
     targets = list(targets)
+    in_flight = None  # the group dispatched last, collected after the next one is prepared
     for i in _owned(range(len(targets))):
         try:
             tg = prepare(i, targets[i])
@@ -381,9 +390,17 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         key = _bucket_key(tg, pad, tg.landmarks is None)
         pending.setdefault(key, []).append(tg)
         if len(pending[key]) == len(devices):  # one target per device
-            yield from run(key, pending.pop(key))
+            launched = launch(key, pending.pop(key))
+            if in_flight is not None:
+                yield from finish(in_flight)
+            in_flight = launched
     for key in list(pending):
-        yield from run(key, pending.pop(key))
+        launched = launch(key, pending.pop(key))
+        if in_flight is not None:
+            yield from finish(in_flight)
+        in_flight = launched
+    if in_flight is not None:
+        yield from finish(in_flight)
 
 
 def _landmark_lookup(landmarks) -> Callable[[int], tuple | None]:
