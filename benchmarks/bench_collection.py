@@ -148,6 +148,9 @@ def measure(name, source, labels_file, targets, folder: Path, truth: bool, k: in
             acc_sep.append(accuracy(np.loadtxt(out_sep / f"{p.stem}.txt", dtype=int), tr, p))
             acc_one.append(row["accuracy"])
     steady = in_process(source, labels_file, targets, k)
+    if name == "six":
+        steady["kill_and_resume"] = kill_and_resume(source, labels_file, targets, folder,
+                                                    out_one, k)
     res = {"set": name, "targets": len(targets),
            "vertices": [r["vertices"] for r in summary],
            "wall_one_call_s": wall_one, "wall_separate_calls_s": wall_sep,
@@ -156,6 +159,29 @@ def measure(name, source, labels_file, targets, folder: Path, truth: bool, k: in
         res.update(accuracy_one_call=float(np.mean(acc_one)),
                    accuracy_separate=float(np.mean(acc_sep)))
     return res
+
+
+def kill_and_resume(source, labels_file, targets, folder: Path, reference: Path, k: int) -> dict:
+    """Kill a one-call run (SIGKILL) once two targets are written, start it again: the rerun
+    must compute only the missing targets, and the files must equal the uninterrupted run's."""
+    import signal
+
+    out = folder / "killed"
+    argv = [sys.executable, "-m", "bsfjax.cli", "transfer", str(source), *map(str, targets),
+            "--labels", str(labels_file), "--out-dir", str(out), "-k", str(k), "--no-progress"]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    while proc.poll() is None and len(list(out.glob("*.txt"))) < 2:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done_before = sorted(p.name for p in out.glob("*.txt"))
+    leftovers = [p.name for p in out.iterdir() if p.name.startswith(".")]
+    r = subprocess.run(argv, capture_output=True, text=True)
+    line = next(ln for ln in r.stderr.splitlines() if "complete (skipped)" in ln)
+    same = all((out / f"{p.stem}.txt").read_bytes() == (reference / f"{p.stem}.txt").read_bytes()
+               for p in targets)
+    return {"killed_after": done_before, "temporaries_left": leftovers, "rerun": line,
+            "rerun_status": r.returncode, "files_equal_uninterrupted": same}
 
 
 def in_process(source, labels_file, targets, k) -> dict:

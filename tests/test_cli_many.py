@@ -172,3 +172,37 @@ def test_landmarks_file_maps_names_and_stems_to_targets(tmp_path):
     lm.write_text(json.dumps({"b.off": [[1, 2], [3, 4]], "c": [[5], [6]], "other.ply": [[0], [0]]}))
     got = _read_landmarks_file(str(lm), [Path("x/a.ply"), Path("y/b.off"), Path("c.obj")], CLIError)
     assert got == {1: ([1, 2], [3, 4]), 2: ([5], [6])}
+
+
+def test_cluster_detection_and_flags(monkeypatch):
+    """No flags: jax.distributed.initialize() (its own SLURM / Open MPI detection) only inside
+    such a job; the flags are passed as given and must come together."""
+    import argparse
+
+    import jax
+
+    from bsfjax._cli_many import _initialize_distributed
+    from bsfjax.cli import CLIError
+
+    calls = []
+    monkeypatch.setattr(jax.distributed, "initialize", lambda **kw: calls.append(kw))
+    monkeypatch.setattr(jax.config, "update", lambda *a: None)
+    args = argparse.Namespace(coordinator=None, num_processes=None, process_id=None)
+    for var in ("SLURM_NTASKS", "OMPI_COMM_WORLD_SIZE"):
+        monkeypatch.delenv(var, raising=False)
+    _initialize_distributed(args, CLIError)
+    monkeypatch.setenv("SLURM_NTASKS", "1")  # a one-task job: nothing to share
+    _initialize_distributed(args, CLIError)
+    assert calls == []
+    monkeypatch.setenv("SLURM_NTASKS", "4")
+    _initialize_distributed(args, CLIError)
+    monkeypatch.delenv("SLURM_NTASKS")
+    monkeypatch.setenv("OMPI_COMM_WORLD_SIZE", "2")
+    _initialize_distributed(args, CLIError)
+    assert calls == [{}, {}]
+    args = argparse.Namespace(coordinator="h:1", num_processes=3, process_id=2)
+    _initialize_distributed(args, CLIError)
+    assert calls[-1] == dict(coordinator_address="h:1", num_processes=3, process_id=2)
+    with pytest.raises(CLIError, match="--process-id must be in"):
+        _initialize_distributed(argparse.Namespace(coordinator="h:1", num_processes=2,
+                                                   process_id=2), CLIError)
