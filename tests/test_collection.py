@@ -26,34 +26,24 @@ def test_size_bucket_is_a_small_bounded_set():
 @pytest.fixture(scope="module")
 def collection():
     """Source: the example source (506 V); targets: the example target at two resolutions
-    (506 and 2018 V: two buckets), the second with landmarks (its own bucket key)."""
+    (506 and 2018 V: padded to the buckets 512 and 2048), the second with landmarks (its own
+    bucket key), in one call."""
     small = bsfjax.example_pair(levels=1)
     large = bsfjax.example_pair(levels=2)
     lm_src = [0, 100, 200, 300]
     lm = {1: (lm_src, lm_src)}  # levels keep the coarse vertices first: vertex i ↔ vertex i
     targets = [small.target, large.target]
-    kw = dict(method="refined", k=10, landmarks=lambda i: lm.get(i))
-    padded = dict(transfer_collection(small.source, small.labels, targets, **kw))
-    # unpadded: the first target (506 → bucket 512, orientation term) is enough to compare
-    unpadded = dict(transfer_collection(small.source, small.labels, targets[:1], pad=False, **kw))
-    return small, targets, lm, padded, unpadded
+    res = dict(transfer_collection(small.source, small.labels, targets, method="refined", k=10,
+                                   landmarks=lambda i: lm.get(i)))
+    return small, targets, lm, res
 
 
-def test_padded_targets_give_the_unpadded_results(collection):
-    _, targets, _, padded, unpadded = collection
-    assert size_bucket(targets[0].n_vertices) > targets[0].n_vertices  # really padded
-    for i, t in enumerate(targets[:1]):
-        a, b = padded[i], unpadded[i]
-        assert a.labels.shape == (t.n_vertices,) and a.p2p.shape == (t.n_vertices,)
-        np.testing.assert_array_equal(a.labels, b.labels)
-        np.testing.assert_array_equal(a.p2p, b.p2p)
-        np.testing.assert_allclose(a.C, b.C, atol=1e-6)
-        np.testing.assert_allclose(a.map_energy, b.map_energy, rtol=1e-5)
-
-
-def test_equals_estimate_map_then_transfer_labels(collection):
-    """Each target's result is the one-pair path's (bsfjax transfer's)."""
-    small, targets, lm, padded, _ = collection
+def test_padded_targets_equal_the_one_pair_path(collection):
+    """Each target's result, computed padded to its size bucket, is the one of the unpadded
+    one-pair path, estimate_map then transfer_labels (what ``bsfjax transfer --out`` runs):
+    the same point map and labels, bit for bit."""
+    small, targets, lm, padded = collection
+    assert all(size_bucket(t.n_vertices) > t.n_vertices for t in targets)  # really padded
     sm = bsfjax.spectrum(small.source, 100)
     for i, t in enumerate(targets):
         sn = bsfjax.spectrum(t, 100)
@@ -61,12 +51,14 @@ def test_equals_estimate_map_then_transfer_labels(collection):
                                   landmarks=lm.get(i), source_mesh=small.source, target_mesh=t)
         res = bsfjax.transfer_labels(sm, sn, small.labels, C=est.C, p2p=est.p2p,
                                      mesh=small.source)
+        assert padded[i].labels.shape == padded[i].p2p.shape == (t.n_vertices,)
         np.testing.assert_array_equal(padded[i].p2p, est.p2p)
         np.testing.assert_allclose(padded[i].C, est.C, atol=1e-4)
         np.testing.assert_array_equal(padded[i].labels, res.labels)
         assert padded[i].regime == res.regime
         assert padded[i].unassigned_share == pytest.approx(res.unassigned_share, abs=1e-6)
         assert padded[i].agreement == pytest.approx(res.agreement, abs=1e-6)
+        assert np.isfinite(padded[i].map_energy) and padded[i].map_energy > 0
     # the pair is the same shape in another pose: the transfer is nearly right
     truth = small.labels[small.p2p]
     mass = np.asarray(bsfjax.spectrum(targets[0], 2).mass)

@@ -8,7 +8,7 @@ Two parts:
 * a hypothesis fuzzer that mutates valid files (truncation, byte flips, inserted tokens such as
   huge or negative numbers, replaced header counts, spliced garbage) and also writes random
   headers with random counts.  It runs for a bounded time: ``BSFJAX_FUZZ_SECONDS`` (default
-  30 s) of work, at most ``BSFJAX_FUZZ_EXAMPLES`` (default 4000) files; every read runs
+  15 s) of work, at most ``BSFJAX_FUZZ_EXAMPLES`` (default 4000) files; every read runs
   under a ``SIGALRM`` watchdog (``READ_TIMEOUT`` s) so a hang fails the test instead of
   stalling CI.
 """
@@ -32,7 +32,7 @@ from bsfjax import MeshError
 
 from .conftest import icosphere
 
-FUZZ_SECONDS = float(os.environ.get("BSFJAX_FUZZ_SECONDS", "30"))
+FUZZ_SECONDS = float(os.environ.get("BSFJAX_FUZZ_SECONDS", "15"))
 FUZZ_EXAMPLES = int(os.environ.get("BSFJAX_FUZZ_EXAMPLES", "4000"))
 READ_TIMEOUT = 10.0
 
