@@ -164,36 +164,52 @@ def _orthonormalize(Z: np.ndarray, Q: np.ndarray, lo: int, rng: np.random.Genera
     """``(C, Qn, R)`` with ``Z = Q C + Qn R``, ``Qn`` orthonormal and ⟂ ``Q``; columns of ``Z``
     that are (numerically) in ``span Q`` are replaced by random directions with ``R = 0``.
 
-    Gram–Schmidt in two passes: first against ``Q[:, lo:]`` only (the last blocks, the only
-    ones ``Z`` is not orthogonal to in exact arithmetic: the Lanczos recurrence), then against
-    all of ``Q`` (full reorthogonalization, removing what rounding left; a float32 copy of
-    ``Q`` for this pass was tried and breaks convergence: ``T`` amplifies what it leaves).
+    Gram–Schmidt twice against ``Q[:, lo:]`` (the last blocks, the only ones ``Z`` is not
+    orthogonal to in exact arithmetic: the Lanczos recurrence), then once against the older
+    columns ``Q[:, :lo]`` (full reorthogonalization, removing what rounding left; a float32
+    copy of ``Q`` for this pass was tried and breaks convergence: ``T`` amplifies what it
+    leaves).  The pass over the old columns, two reads of ``Q``, is most of the cost.
     """
-    Ql = Q[:, lo:]
     C = np.zeros((Q.shape[1], Z.shape[1]))
-    C[lo:] = Ql.T @ Z
-    Z -= Ql @ C[lo:]
-    C2 = Q.T @ Z
-    Z -= Q @ C2
-    C += C2
+    norm0 = np.linalg.norm(Z, axis=0)
+    Ql = Q[:, lo:]
+    for _ in range(2):  # local part: two passes (where the cancellation is)
+        c = Ql.T @ Z
+        Z -= Ql @ c
+        C[lo:] += c
+    if lo:  # older part: one pass, its coefficients are rounding-sized
+        Qo = Q[:, :lo]
+        c = Qo.T @ Z
+        Z -= Qo @ c
+        C[:lo] = c
+    ratio = np.linalg.norm(Z, axis=0) / np.maximum(norm0, 1e-300)
+    if ratio.min() < 1e-3:  # strong cancellation: what is left may lean on Q; pass again
+        c = Q.T @ Z
+        Z -= Q @ c
+        C += c
+        ratio = np.linalg.norm(Z, axis=0) / np.maximum(norm0, 1e-300)
     Qn, R = _cholqr(Z)
-    scale = max(float(np.abs(C).max(initial=0.0)), float(np.abs(R).max(initial=0.0)), 1e-300)
-    bad = ~np.isfinite(np.diag(R)) | (np.abs(np.diag(R)) <= 1e-10 * scale)
+    bad = ~np.isfinite(np.diag(R)) | (ratio <= 1e-11)
     if bad.any():  # breakdown: an invariant subspace was found; go on with new directions
         Qn, R = np.linalg.qr(Z)  # Householder, stable on a rank-deficient block
-        bad = np.abs(np.diag(R)) <= 1e-10 * scale
+        bad = (np.abs(np.diag(R)) <= 1e-11 * np.maximum(norm0, 1e-300)) | (ratio <= 1e-11)
         R[bad, :] = 0.0
         Y = rng.standard_normal((Z.shape[0], int(bad.sum())))
         for _ in range(2):
             Y -= Q @ (Q.T @ Y)
             Y -= Qn[:, ~bad] @ (Qn[:, ~bad].T @ Y)
         Qn[:, bad] = np.linalg.qr(Y)[0]
+        for _ in range(2):  # the kept columns of a rank-deficient block: clean against Q
+            c = Q.T @ Qn
+            Qn -= Q @ c
+        Qr, Rr = np.linalg.qr(Qn)  # ≈ Qn up to signs (Qn was orthonormal): keep Qn's signs
+        Qn = Qr * np.sign(np.diag(Rr))
     return C, Qn, R
 
 
 def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
                   tol: float = 1e-8, block: int | None = None, basis: int | None = None,
-                  max_restarts: int = 50, backend: str = "auto", keep: int | None = None):
+                  max_restarts: int = 12, backend: str = "auto", keep: int | None = None):
     """``(evals, evecs, info)``: the ``k`` smallest eigenpairs of ``W φ = λ A φ``, ascending,
     eigenvectors A-orthonormal.
 
@@ -246,7 +262,7 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
 
     put(0, np.linalg.qr(rng.standard_normal((n, b)))[0])
     n_exp, n_cols, solves, restarts, lo, blocks = 0, b, 0, 0, 0, 0
-    check_every = 2  # Rayleigh–Ritz convergence checks every this many blocks
+    next_check, last = 0, None  # block count of the next check; (blocks, max estimate)
     timing = dict(factor=time.perf_counter() - t_start, solve=0.0, orth=0.0, rayleigh_ritz=0.0)
 
     def estimates(theta, S):
@@ -281,7 +297,7 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
             H[n_exp:n_cols, n_cols:n_cols + new] = R.T
             n_exp, n_cols = n_cols, n_cols + new
             blocks += 1
-            if n_exp < k + b or blocks % check_every:
+            if n_exp < k + b or blocks < next_check:
                 continue
         if checked != n_exp:  # Rayleigh–Ritz and the convergence check
             t0 = time.perf_counter()
@@ -291,6 +307,13 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
             lam = sigma + 1.0 / theta[:keep]
             scale_k = max(abs(lam[k - 1]), np.finfo(float).tiny)
             est = estimates(theta, S) / scale_k
+            # next check: where the geometric decay of the largest residual since the last
+            # check reaches tol (each check costs an eigh of H and a product with W)
+            gap = 2
+            if last is not None and 0 < est.max() < last[1] and blocks > last[0]:
+                rate = (est.max() / last[1]) ** (1.0 / (blocks - last[0]))
+                gap = int(np.clip(0.8 * np.log(tol / est.max()) / np.log(rate), 1, 8))
+            next_check, last = blocks + gap, (blocks, float(est.max()))
             if np.all(est <= tol):  # confirm with the true residuals
                 Y = Q[:, :n_exp] @ S[:, :k]
                 Phi = Y / d[:, None]

@@ -24,7 +24,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg
 
 from ._files import atomic_path
-from ._eigensolver import MissedEigenvalue, block_lanczos, default_block, has_cholmod
+from ._eigensolver import block_lanczos, default_block, has_cholmod
 from ._errors import BSFError, MeshError
 from ._laplacian import MASS_TYPES, laplacian
 from ._mesh import Mesh, n_components
@@ -208,7 +208,7 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
                 try:
                     evals, evecs, _ = block_lanczos(W, a, k, sigma,
                                                     tol=FAST_TOL if method == "fast" else 1e-8)
-                except MissedEigenvalue as exc:  # a high multiplicity: ARPACK instead
+                except BSFError as exc:  # a missed multiplicity or no convergence: ARPACK
                     warnings.warn(f"{exc}; falling back to method='lanczos'", stacklevel=2)
             if evals is None:
                 v0 = np.random.default_rng(0).standard_normal(n)  # fixed start: deterministic
