@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 import bsfjax
 from bsfjax import BSFError
-from bsfjax._eigensolver import block_lanczos, factorize, has_cholmod
+from bsfjax._eigensolver import MissedEigenvalue, block_lanczos, factorize, has_cholmod
 from bsfjax._spectrum import interval_operators
 
 from .conftest import icosphere
@@ -107,6 +107,14 @@ def test_breakdown_few_distinct_eigenvalues():
     assert abs(phi[7:]).max() < 1e-8  # nothing from the eigenvalue 5
 
 
+def test_probe_catches_a_missed_multiplicity():
+    v, f = icosphere(2)  # 162 vertices; λ(l=2) has multiplicity 5 > block 4
+    W, A = bsfjax.laplacian(bsfjax.Mesh(v, f))
+    a = A.diagonal()
+    with pytest.raises(MissedEigenvalue, match="missed 1 eigenvalue"):
+        block_lanczos(W, a, 10, _sigma(W, a), tol=1e-3, backend="superlu")
+
+
 def test_errors_are_clear():
     W, a = interval_operators(800)
     with pytest.raises(BSFError, match="did not converge"):
@@ -133,7 +141,10 @@ def test_method_option_and_cache_key(tmp_path, sphere3):
             for m in ("block", "lanczos", "dense", "fast")}
     assert len(keys) == 4
     first = bsfjax.spectrum(sphere3, 10, cache_dir=tmp_path, method="lanczos")
-    fast = bsfjax.spectrum(sphere3, 10, cache_dir=tmp_path, method="fast")
+    # the sphere's 5-fold λ(l=2) exceeds the block of 4: the block solver misses or stalls,
+    # and spectrum says so and falls back to ARPACK instead of returning a wrong basis
+    with pytest.warns(UserWarning, match="falling back to method='lanczos'"):
+        fast = bsfjax.spectrum(sphere3, 10, cache_dir=tmp_path, method="fast")
     assert len(list(tmp_path.glob("*.npz"))) == 2  # one file per solver
     again = bsfjax.spectrum(sphere3, 10, cache_dir=tmp_path, method="lanczos")
     np.testing.assert_array_equal(again.evecs, first.evecs)
