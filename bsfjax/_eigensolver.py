@@ -360,5 +360,6 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
         H[keep:keep + nb, :keep] = coupling
         H[:keep, keep:keep + nb] = coupling.T
         n_exp, n_cols, lo = keep, keep + nb, 0
+        checked = -1  # a new basis: no check of it yet (n_exp may repeat an earlier value)
         restarts += 1
         timing["rayleigh_ritz"] += time.perf_counter() - t0

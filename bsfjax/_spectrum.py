@@ -212,11 +212,14 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
             sigma = -1e-6 * scale
         try:
             evals = None
-            if method in ("block", "fast"):
+            # the block solver needs σ below the spectrum (W − σA positive definite): W is
+            # positive semidefinite, so any σ < 0 is; a user's σ >= 0 goes to ARPACK
+            if method in ("block", "fast") and sigma < 0:
                 try:
                     evals, evecs, _ = block_lanczos(W, a, k, sigma,
                                                     tol=FAST_TOL if method == "fast" else 1e-8)
-                except BSFError as exc:  # a missed multiplicity or no convergence: ARPACK
+                except (BSFError, RuntimeError) as exc:  # a missed multiplicity, no
+                    # convergence, or W − σA not positive definite (σ above λ₁): ARPACK
                     warnings.warn(f"{exc}; falling back to method='lanczos'", stacklevel=2)
             if evals is None:
                 v0 = np.random.default_rng(0).standard_normal(n)  # fixed start: deterministic
