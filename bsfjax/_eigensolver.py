@@ -19,7 +19,7 @@ to a whole block of ``b`` right-hand sides at a time.  Against ARPACK's single-v
   gain from blocks).
 
 The price: a block Krylov space needs more solves than ARPACK's single-vector one (about 500
-against 300 for k = 100), so the measured gain is ~1.9× at 10⁵ vertices (``docs/
+against 300 for k = 100), so the measured gain is 1.8–2.0× at 10⁵–4·10⁵ vertices (``docs/
 benchmarks.md``), and the orthogonalization, bound by memory bandwidth, is still ~40 % of
 the time.  Tried and dropped: a float32 copy of ``Q`` for the reorthogonalization (``T``
 amplifies its errors; no convergence), larger blocks (more solves, no cheaper per vector past

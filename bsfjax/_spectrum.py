@@ -152,8 +152,8 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
               exact: every pair reaches ``‖Kψ − λψ‖ ≤ 10⁻⁸ λ_k`` by the Krylov estimate and
               ``≤ 10⁻⁶ λ_k`` recomputed (``K = A^-½ W A^-½``, ``ψ = A^½ φ``); on the TOSCA cat
               (111K / 445K vertices, k = 100) eigenvalues agree with ARPACK's to 3e-13 / 8e-13
-              relative and the eigenspaces to a principal-angle sine of 5e-7, at 1.9× / 1.8×
-              ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without CHOLMOD it uses
+              relative and the eigenspaces to a principal-angle sine of 8e-7, at 1.85–2.0× /
+              1.8× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without CHOLMOD it uses
               scipy's SuperLU, which solves one column at a time: slower than ``"lanczos"``.
               Shapes with exact eigenvalue multiplicities above the block size (spheres,
               symmetric toy meshes) may make it miss or not converge; ``spectrum`` then warns
@@ -165,11 +165,11 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
               for users who want speed over exactness.  Error bounds: eigenvalue error
               ``≤ ‖r‖`` (Bauer–Fike), in practice ``≈ ‖r‖² / gap``; eigenvector angle
               ``≤ ‖r‖ / gap`` to the eigenspace.  Measured on the TOSCA cat (k = 100): the
-              largest recomputed residual was 1.1e-4 (111K) / 2.4e-4 (445K) λ_k, eigenvalues
-              within 3.4e-13 / 8.1e-13 relative of ARPACK's, eigenspaces of the first 25/50/100
+              largest recomputed residual was 6e-4 (111K) / 2.4e-4 (445K) λ_k, eigenvalues
+              within 3.5e-13 / 7.5e-13 relative of ARPACK's, eigenspaces of the first 25/50/100
               vectors within a principal-angle sine of 6e-7 (the residual lies in high
               frequencies, far from the wanted eigenvalues), and the BSF transfer error of
-              ``bench_large.py`` unchanged (``docs/benchmarks.md``); it is only 1.1–1.3×
+              ``bench_large.py`` unchanged (``docs/benchmarks.md``); it is only 1.1–1.2×
               faster than ``"block"`` there, because the block method converges abruptly.
 
     Uses a fixed start (deterministic).  Eigenvectors are A-orthonormalized and sign-fixed.
