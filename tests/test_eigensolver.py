@@ -91,28 +91,28 @@ def test_sphere_matches_dense_lapack(sphere3, backend):
 
 
 def test_spectrum_methods_agree_on_faust(faust_mesh):
-    # the 6890-vertex FAUST scan: block Lanczos against ARPACK, same operators, k = 60
-    block = bsfjax.spectrum(faust_mesh, 60, method="block")
-    arpack = bsfjax.spectrum(faust_mesh, 60, method="lanczos")
+    # the 6890-vertex FAUST scan: block Lanczos against ARPACK, same operators, k = 30
+    block = bsfjax.spectrum(faust_mesh, 30, method="block")
+    arpack = bsfjax.spectrum(faust_mesh, 30, method="lanczos")
     np.testing.assert_allclose(block.evals[1:], arpack.evals[1:], rtol=1e-9)
     gaps = np.diff(arpack.evals)
     simple = np.flatnonzero((gaps[:-1] > 1e-3 * arpack.evals[-1])
                             & (gaps[1:] > 1e-3 * arpack.evals[-1])) + 1
     dots = np.einsum("ij,i,ij->j", block.evecs, block.mass, arpack.evecs)
     assert np.abs(dots[simple]).min() > 1 - 1e-6  # same vectors (the sign rule fixes signs)
-    np.testing.assert_array_equal(bsfjax.spectrum(faust_mesh, 60, method="block").evecs,
+    np.testing.assert_array_equal(bsfjax.spectrum(faust_mesh, 30, method="block").evecs,
                                   block.evecs)  # deterministic
 
 
 def test_fast_method_error_is_as_documented(faust_mesh):
-    exact = bsfjax.spectrum(faust_mesh, 60, method="lanczos")
-    fast = bsfjax.spectrum(faust_mesh, 60, method="fast")
+    exact = bsfjax.spectrum(faust_mesh, 30, method="lanczos")
+    fast = bsfjax.spectrum(faust_mesh, 30, method="fast")
     rel = np.abs(fast.evals[1:] - exact.evals[1:]) / exact.evals[1:]
     assert rel.max() < 1e-5
     gram = fast.evecs.T @ (fast.mass[:, None] * fast.evecs)
-    assert abs(gram - np.eye(60)).max() < 1e-10
-    # the span of the first 50 (a gap follows) stays close to the exact one
-    assert _projector_gap(fast.evecs[:, :50], exact.evecs[:, :50], exact.mass) < 0.1
+    assert abs(gram - np.eye(30)).max() < 1e-10
+    # the span of the first 20 stays close to the exact one (measured ~1e-7 on the cat)
+    assert _projector_gap(fast.evecs[:, :20], exact.evecs[:, :20], exact.mass) < 1e-3
 
 
 def test_breakdown_few_distinct_eigenvalues():
