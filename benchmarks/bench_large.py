@@ -23,6 +23,7 @@ as a first call by a user would.  Memory: peak resident set size of the process
 (``psutil``).  Writes JSON to ``--out``.
 
     python benchmarks/bench_large.py --out bench-results/large.json --levels 1
+    python benchmarks/bench_large.py --out large-fast.json --levels 1 --method fast
 """
 
 from __future__ import annotations
@@ -60,13 +61,14 @@ def cat_pair(data: Path, levels: int):
     return subdivide(m0, "loop", levels), subdivide(m6, "loop", levels)
 
 
-def cached_spectra(data: Path, levels: int, k: int, cache: Path):
+def cached_spectra(data: Path, levels: int, k: int, cache: Path, method: str = "auto"):
     """Spectra of the pair, computed (if not cached) in a child process."""
     code = ("import sys; sys.path.insert(0, {bench!r}); from bench_large import cat_pair, "
             "Path; import bsfjax; "
-            "[bsfjax.spectrum(m, {k}, cache_dir={cache!r}) for m in cat_pair(Path({data!r}), "
-            "{levels})]").format(bench=str(Path(__file__).resolve().parent), k=k,
-                                 cache=str(cache), data=str(data), levels=levels)
+            "[bsfjax.spectrum(m, {k}, cache_dir={cache!r}, method={method!r}) for m in "
+            "cat_pair(Path({data!r}), {levels})]").format(
+                bench=str(Path(__file__).resolve().parent), k=k, cache=str(cache),
+                data=str(data), levels=levels, method=method)
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-c", code], check=True)
     return time.perf_counter() - t0
@@ -123,14 +125,15 @@ def machine() -> str:
             f"jax {jax.__version__} {jax.default_backend()} ({jax.device_count()} device(s))")
 
 
-def run(data: Path, levels: int, k: int, n_functions: int, cache: Path, sparsity: int = 10):
-    t_spec = cached_spectra(data, levels, k, cache)
+def run(data: Path, levels: int, k: int, n_functions: int, cache: Path, sparsity: int = 10,
+        method: str = "auto"):
+    t_spec = cached_spectra(data, levels, k, cache, method)
     rows = []
     src_mesh, tgt_mesh = stage("load + Loop subdivision (both)", lambda: cat_pair(data, levels), rows)
     src = stage("load cached spectrum (source)",
-                lambda: bsfjax.spectrum(src_mesh, k, cache_dir=cache), rows)
+                lambda: bsfjax.spectrum(src_mesh, k, cache_dir=cache, method=method), rows)
     tgt = stage("load cached spectrum (target)",
-                lambda: bsfjax.spectrum(tgt_mesh, k, cache_dir=cache), rows)
+                lambda: bsfjax.spectrum(tgt_mesh, k, cache_dir=cache, method=method), rows)
     n = src_mesh.n_vertices
     centers = stage("farthest_point_sampling 5%",
                     lambda: bsfjax.farthest_point_sampling(src_mesh, 0.05), rows)
@@ -151,7 +154,8 @@ def run(data: Path, levels: int, k: int, n_functions: int, cache: Path, sparsity
         ("farthest", "build_frame", "encode", "fmap_from", "transfer_frame", "decode")))
     result = {
         "mesh": f"tosca/cat/cat0.off -> cat6.off, Loop x{levels}",
-        "n_vertices": n, "k": k, "n_atoms": q, "n_functions": n_functions,
+        "n_vertices": n, "k": k, "spectrum_method": method, "n_atoms": q,
+        "n_functions": n_functions,
         "sparsity": sparsity, "nnz": frame.nnz, "atom_list_width": int(frame.atom_lists.shape[1]),
         "density": frame.nnz / (n * q),
         "dense_frame_gib_float32": n * q * 4 / GIB,
@@ -177,8 +181,11 @@ def main(argv=None):
     ap.add_argument("--k", type=int, default=100)
     ap.add_argument("--functions", type=int, default=100)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/bsfjax-spectra"))
+    ap.add_argument("--method", default="auto", help="bsfjax.spectrum's method ('fast': the "
+                    "approximate eigensolver, to see its effect on the transfer error)")
     args = ap.parse_args(argv)
-    result = run(args.data, args.levels, args.k, args.functions, args.cache)
+    result = run(args.data, args.levels, args.k, args.functions, args.cache,
+                 method=args.method)
     write_text_atomic(args.out, json.dumps(result, indent=2) + "\n")
     print(f"wrote {args.out}")
 
