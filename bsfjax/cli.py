@@ -299,7 +299,8 @@ def _transfer_one(args) -> int:
             p2p = check_indices(p2p, "p2p", source.n_vertices, what="source vertex indices")
         except ValueError as exc:
             raise CLIError(f"p2p file {rest[0]}: {exc}") from None
-    sm, sn = spectrum(source, k_spec), spectrum(target, k_spec)
+    sm = spectrum(source, k_spec, cache_dir=args.spectrum_cache)
+    sn = spectrum(target, k_spec, cache_dir=args.spectrum_cache)
     print(f"spectra: {source.n_vertices} and {target.n_vertices} vertices, k = {k_spec}", file=sys.stderr)
     if kind == "p2p":
         from ._fmap import fmap_from_p2p
