@@ -120,7 +120,7 @@ def cmd_transfer_many(args, error) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from ._collection import transfer_collection
+    from ._collection import process_share, transfer_collection
     from ._files import atomic_path
     from ._mesh import load_mesh, save_mesh
 
@@ -151,8 +151,7 @@ def cmd_transfer_many(args, error) -> int:
         source, values, [targets[i] for i in todo], labels=labels, method=args.method, k=args.k,
         landmarks=lambda j: landmarks.get(todo[j]), threshold=args.threshold,
         errors="report", spectrum_cache=args.spectrum_cache)
-    mine = sum(1 for j in range(len(todo))
-               if jax.devices()[j % jax.device_count()].process_index == jax.process_index())
+    mine = len(process_share(range(len(todo))))
     bar = tqdm(total=mine, desc="targets", unit="target", disable=args.no_progress,
                file=sys.stderr)
     for j, res in results:
@@ -214,11 +213,13 @@ def _truth(truth_dir, stem: str, n: int, error):
 def _write_summary(out_dir: Path, targets, records, multi: bool) -> None:
     """``summary.json``: this run's records, and the earlier run's for the skipped targets.
     Under ``jax.distributed`` each process writes its part; process 0 merges them."""
+    from ._files import write_text_atomic
+
     part = out_dir / f".summary.part{_pid()}.json"
     if multi:
         from jax.experimental import multihost_utils
 
-        _write_now(part, json.dumps(records))
+        write_text_atomic(part, json.dumps(records), immediate=True)
         multihost_utils.sync_global_devices("bsfjax transfer: parts written")
         if _pid() != 0:
             return
@@ -241,7 +242,9 @@ def _write_summary(out_dir: Path, targets, records, multi: bool) -> None:
             rows.append(old[str(p)])
         else:
             rows.append({"target": str(p), "status": "skipped"})
-    _write_now(summary, json.dumps({"targets": rows}, indent=1) + "\n")
+    # at once, not at the end of the command's output transaction: the processes of a
+    # distributed run read each other's parts, and a killed run keeps what it finished
+    write_text_atomic(summary, json.dumps({"targets": rows}, indent=1) + "\n", immediate=True)
     if multi:
         for p in out_dir.glob(".summary.part*.json"):
             p.unlink(missing_ok=True)
@@ -251,15 +254,6 @@ def _pid() -> int:
     import jax
 
     return jax.process_index()
-
-
-def _write_now(path: Path, text: str) -> None:
-    """Atomically, at once (not at the end of the command's output transaction): a killed run
-    keeps what it finished, and the processes of a distributed run see each other's parts."""
-    from ._files import atomic_path
-
-    with atomic_path(path, immediate=True) as tmp:
-        tmp.write_text(text)
 
 
 __all__ = ["cmd_transfer_many", "expand_targets", "MESH_SUFFIXES"]

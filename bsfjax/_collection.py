@@ -227,7 +227,7 @@ def _cast_tree(tree):
                         tree)
 
 
-def _owned(indices: Sequence[int]) -> list[int]:
+def process_share(indices: Sequence[int]) -> list[int]:
     """The targets of this process: target ``i`` goes to global device ``i mod D``."""
     devices = jax.devices()
     me = jax.process_index()
@@ -382,7 +382,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     # on accelerators the next target's eigensolve (host) overlaps the dispatched kernel; on a
     # CPU backend both would share the same cores (measured slower), so they alternate
     overlap = jax.default_backend() != "cpu"
-    for i in _owned(range(len(targets))):
+    for i in process_share(range(len(targets))):
         try:
             tg = prepare(i, targets[i])
         except (BSFError, ValueError, OSError) as exc:

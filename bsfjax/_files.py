@@ -173,15 +173,15 @@ def remove_live_temps() -> None:
     LIVE_TEMPS.clear()
 
 
-def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically."""
-    with atomic_path(path) as tmp:
+def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, immediate: bool = False) -> None:
+    """Write ``data`` to ``path`` atomically (``immediate``: as :func:`atomic_path`)."""
+    with atomic_path(path, immediate=immediate) as tmp:
         tmp.write_bytes(data)
 
 
-def write_text_atomic(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path`` atomically."""
-    write_bytes_atomic(path, text.encode("utf-8"))
+def write_text_atomic(path: str | os.PathLike, text: str, *, immediate: bool = False) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically (``immediate``: as :func:`atomic_path`)."""
+    write_bytes_atomic(path, text.encode("utf-8"), immediate=immediate)
 
 
 def _same(a: Path, b: Path) -> bool:
