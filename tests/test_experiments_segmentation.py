@@ -11,7 +11,7 @@ from bsfjax.experiments._datasets import load_dataset
 from bsfjax.experiments.segmentation import (label_metrics, load_segmentation, report,
                                              segmentation_experiment, shape_labels)
 
-from .conftest import data_path
+from .conftest import DATA, data_path
 
 
 def test_load_segmentation_json_first_name_wins(tmp_path):
@@ -90,7 +90,7 @@ def test_reproduce_needs_the_segmentation(tmp_path):
                   segmentation="x.json")
 
 
-@pytest.mark.skipif(not data_path("faust_5k").exists(), reason="../shared/data/faust_5k absent")
+@pytest.mark.skipif(not (DATA / "faust_5k").exists(), reason="../shared/data/faust_5k absent")
 def test_remeshed_labels_follow_the_template():
     """FAUST_5k: a vertex named by the ``.vts`` list has its template vertex's label."""
     ds = load_dataset(data_path("faust_5k"))
