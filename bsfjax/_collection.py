@@ -38,14 +38,14 @@ from ._errors import BSFError
 from ._estimation import FmapWeights, _cast, _energy, _geometry, _Geometry, _setup, _Shape, \
     _solve, _weights_array
 from ._fmap import _DEFAULT_BUDGET, _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
-from ._highlevel import ORIENT_WEIGHT, _regime
+from ._highlevel import ORIENT_WEIGHT, _check_landmarks, _regime
 from ._indicators import labels_to_indicators
 from ._mesh import Mesh, load_mesh
 from ._methods import BSF, GeodesicBalls, Pair, RefinedPullBack, SaturatedHeat, \
     SpectralProjection, as_method, method_name
 from ._refine import REFINE_EIGENPAIRS
-from ._spectrum import Spectrum, spectrum, unit_area
-from ._validate import check_indices, check_int, compact_labels, pow2_scale
+from ._spectrum import Spectrum, spectrum, unit_area, unit_area_pair
+from ._validate import check_int, compact_labels
 
 __all__ = ["transfer_collection", "TargetTransfer", "size_bucket", "BUCKET_FACTORS"]
 
@@ -313,7 +313,6 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             rep["distances"] = np.asarray(geodesic_distances(source, rep["centers"]),
                                           np.float64) / np.sqrt(a0)
     chunk = max(8, _DEFAULT_BUDGET // n_m)
-    area_m = float(np.sum(src_spec.mass))
     lm_of = _landmark_lookup(landmarks)
     pending: dict[tuple, list[_Target]] = {}
 
@@ -323,19 +322,10 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         if mesh.n_vertices <= k_spec:
             raise BSFError(f"{mesh.name or f'target {i}'}: {mesh.n_vertices} vertices, too few "
                            f"for {k_spec} eigenpairs")
-        lm = lm_of(i)
-        if lm is not None:
-            src_i, tgt_i = (np.asarray(x) for x in lm)
-            if src_i.ndim != 1 or src_i.shape != tgt_i.shape or src_i.size == 0:
-                raise BSFError(f"landmarks of target {i}: two lists of equal, non-zero length "
-                               f"expected, got {src_i.size} and {tgt_i.size}")
-            lm = (check_indices(src_i, "source landmarks", n_m),
-                  check_indices(tgt_i, "target landmarks", mesh.n_vertices))
+        lm = _check_landmarks(lm_of(i), n_m, mesh.n_vertices)
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
-        a = float(pow2_scale(np.sqrt(area_m * float(np.sum(spec.mass))), even=True))
-        scaled = Spectrum(np.asarray(spec.evals) * a, np.asarray(spec.evecs) * np.sqrt(a),
-                          np.asarray(spec.mass) / a)
-        return _Target(i, mesh, scaled, a / a0, lm, time.perf_counter() - t)
+        _, a, scaled, _ = unit_area_pair(src_spec, spec)  # the pair's common factor
+        return _Target(i, mesh, scaled, float(a) / a0, lm, time.perf_counter() - t)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
