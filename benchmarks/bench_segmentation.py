@@ -71,7 +71,7 @@ def main(argv=None) -> int:
     sm, sn = (bj.spectrum(e.mesh, 100, cache_dir=args.cache) for e in (src, tgt))
     lm = bj.farthest_point_sampling(src.mesh, 5)
     est = bj.estimate_map(sm.truncate(60), sn.truncate(60), k=30, landmarks=(lm, lm),
-                          refine_to=60)
+                          refine_to=60, source_mesh=src.mesh, target_mesh=tgt.mesh)
     lab = shape_labels(ds, 0, template)
     times = []
     for _ in range(args.repeats + 1):

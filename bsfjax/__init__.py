@@ -9,7 +9,7 @@ owns each step, see ``docs/architecture.md``)::
     mesh        Mesh, load_mesh, save_mesh, mesh_report, example_pair        _mesh, _example
     operators   laplacian -> (W, A)                                           _laplacian
     spectrum    Spectrum, spectrum, spectrum_from_operators                   _spectrum
-    sampling    farthest_point_sampling, geodesic_distances                   _sampling, _geodesics
+    sampling    farthest_point_sampling, subsample, geodesic_distances        _sampling, _geodesics
     frame       Frame, SparseFrame, build_frame, transfer_frame, ...          _frame, ...
     coding      OMP, ErrorOMP, LeastSquares, Lasso, encode, decode            _coding, ...
     transfer    METHODS, BSF, ..., Pair, transfer, transfer_pairs             _methods, _transfer
@@ -40,7 +40,7 @@ from ._spectrum import (Spectrum, interval_spectrum, spectrum, spectrum_from_ope
                         stack_spectra)
 
 # sampling
-from ._sampling import farthest_point_sampling
+from ._sampling import Subsample, farthest_point_sampling, subsample
 from ._geodesics import geodesic_distances, geodesic_error
 
 # frame
@@ -92,7 +92,7 @@ __all__ = [
     "laplacian", "Spectrum", "interval_spectrum", "spectrum", "spectrum_from_operators",
     "stack_spectra",
     # sampling
-    "farthest_point_sampling", "geodesic_distances", "geodesic_error",
+    "farthest_point_sampling", "subsample", "Subsample", "geodesic_distances", "geodesic_error",
     # frame
     "AbstractFrame", "Frame", "SparseFrame", "build_frame", "transfer_frame", "adaptive_taus",
     "prune_frame",

@@ -5,7 +5,7 @@ followed by :func:`bsfjax.transfer_labels` does for each pair — WKS descriptor
 WKS), the functional map of :func:`bsfjax.estimate_fmap` (orientation term without
 landmarks), ZoomOut, its point map, and the method's transfer through the one engine
 (``method.prepare`` / ``carry``) — but with the source prepared once and the targets run
-through **one jitted, vmapped kernel** per group of equal shapes:
+through **one jitted kernel** per group of equal shapes:
 
 - **size buckets**: a target of ``n`` vertices (``m`` faces) is padded to the bucket size
   ``size_bucket(n)`` (``size_bucket(m)``): extra vertices have zero mass and zero eigenvector
@@ -38,12 +38,13 @@ from ._errors import BSFError
 from ._estimation import FmapWeights, _cast, _energy, _geometry, _Geometry, _setup, _Shape, \
     _solve, _weights_array
 from ._fmap import _DEFAULT_BUDGET, _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
-from ._highlevel import ORIENT_WEIGHT, _check_landmarks, _regime
+from ._highlevel import ORIENT_WEIGHT, ZOOMOUT_SAMPLES, _check_landmarks, _regime
 from ._indicators import labels_to_indicators
 from ._mesh import Mesh, load_mesh
 from ._methods import BSF, GeodesicBalls, Pair, RefinedPullBack, SaturatedHeat, \
     SpectralProjection, as_method, method_name
 from ._refine import REFINE_EIGENPAIRS
+from ._sampling import Subsample, subsample
 from ._spectrum import Spectrum, spectrum, unit_area, unit_area_pair
 from ._validate import check_int, compact_labels
 
@@ -94,6 +95,7 @@ class _Config(NamedTuple):
     n_energies: int
     n_landmarks: int  # 0: orientation term instead
     chunk: int
+    zoomout_chunk: int | None  # None: ZoomOut on every vertex, else on the subsamples
 
 
 @functools.lru_cache(maxsize=64)
@@ -153,10 +155,15 @@ def _one_target(rep, it, *, cfg: _Config):
     phi_m, phi_n = src.evecs.astype(dt), tgt.evecs.astype(dt)
     mass_n = tgt.mass.astype(dt)
     C_ref = C0
-    if km > k:  # ZoomOut k → k_map in steps of one, as bsfjax.zoomout's default
+    if km > k:  # ZoomOut k → k_map in steps of one, as bsfjax.estimate_map
         sizes = _size_schedule(k, km, 1, km - k)
-        C_ref = _zoomout_jit(C0, phi_m[:, :km], phi_n[:, :km], mass_n, sizes_n=sizes,
-                             sizes_m=sizes, chunk=cfg.chunk, adjoint=False)
+        zo_m, zo_n, w_n, chunk = phi_m[:, :km], phi_n[:, :km], mass_n, cfg.chunk
+        if cfg.zoomout_chunk is not None:  # padded samples: weight 0 (no cell names them)
+            idx_n = it["zo_indices"]
+            w_n = jax.ops.segment_sum(mass_n, it["zo_cells"], num_segments=idx_n.shape[0])
+            zo_m, zo_n, chunk = zo_m[rep["zo_indices"]], zo_n[idx_n], cfg.zoomout_chunk
+        C_ref = _zoomout_jit(C0, zo_m, zo_n, w_n, sizes_n=sizes, sizes_m=sizes, chunk=chunk,
+                             adjoint=False)
     p2p = _to_p2p(C_ref, phi_m[:, :km], phi_n[:, :km], cfg.chunk, False)
     C = _from_p2p(p2p, phi_m[:, :k], phi_n[:, :k], mass_n)
     energy = _energy(C, pb)
@@ -181,6 +188,7 @@ class _Target(NamedTuple):
     spectrum: Spectrum  # unit-area-pair scaled, float64
     ratio: float
     landmarks: tuple | None
+    samples: Subsample | None  # ZoomOut's
     seconds: float
 
 
@@ -201,17 +209,21 @@ def _geometry_arrays(mesh: Mesh, m_b: int) -> dict:
             "third_area": _pad_rows(g.third_area, m_b)}
 
 
-def _bucket_key(t: _Target, pad: bool, orient: bool):
+def _bucket_key(t: _Target, pad: bool, orient: bool, n_samples: int | None):
     n, m = t.mesh.n_vertices, t.mesh.n_faces
     n_b = size_bucket(n) if pad else n
     m_b = (size_bucket(m) if pad else m) if orient else 0
-    return n_b, m_b, 0 if t.landmarks is None else len(t.landmarks[0])
+    s_b = 0 if n_samples is None else min(n_samples, n_b)
+    return n_b, m_b, 0 if t.landmarks is None else len(t.landmarks[0]), s_b
 
 
-def _item_arrays(t: _Target, n_b: int, m_b: int) -> dict:
+def _item_arrays(t: _Target, n_b: int, m_b: int, s_b: int) -> dict:
     s = t.spectrum
     out = {"evals": np.asarray(s.evals), "evecs": _pad_rows(np.asarray(s.evecs), n_b),
            "mass": _pad_rows(np.asarray(s.mass), n_b), "ratio": np.float64(t.ratio)}
+    if t.samples is not None:
+        out["zo_indices"] = _pad_rows(t.samples.indices, s_b)
+        out["zo_cells"] = _pad_rows(t.samples.cells, n_b)
     if t.landmarks is not None:
         out["landmarks_source"] = np.asarray(t.landmarks[0], np.int32)
         out["landmarks_target"] = np.asarray(t.landmarks[1], np.int32)
@@ -238,6 +250,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                         method="refined", k: int = 30, landmarks=None,
                         threshold: float | None = None, pad: bool = True,
                         n_energies: int = 100, n_bsf: float | int = 0.05, seed: int = 0,
+                        zoomout_samples: int | None = ZOOMOUT_SAMPLES,
                         spectrum_cache: str | None = None,
                         errors: str = "raise") -> Iterator[tuple[int, TargetTransfer | Exception]]:
     """Transfer one segmentation (or functions) from ``source`` to every mesh of ``targets``.
@@ -259,6 +272,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     - ``landmarks``: ``None``, or a callable ``index → (source indices, target indices) or
       None``, or a sequence with one such entry per target.
     - ``threshold``: as :func:`bsfjax.transfer_labels`.
+    - ``zoomout_samples``: as :func:`bsfjax.estimate_map` (ZoomOut on this many
+      farthest-point samples per shape; ``None``: every vertex).
     - ``pad``: pad vertex and face counts to :func:`size_bucket` sizes (``False``: one
       compilation per distinct count).
     - ``spectrum_cache``: folder for the spectra (see :func:`bsfjax.spectrum`).
@@ -313,6 +328,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             rep["distances"] = np.asarray(geodesic_distances(source, rep["centers"]),
                                           np.float64) / np.sqrt(a0)
     chunk = max(8, _DEFAULT_BUDGET // n_m)
+    zo_chunk = None
+    if zoomout_samples is not None:
+        check_int(zoomout_samples, "zoomout_samples", 1)
+        sub_m = subsample(source, zoomout_samples)
+        rep["zo_indices"] = sub_m.indices
+        zo_chunk = max(8, _DEFAULT_BUDGET // sub_m.indices.size)
     lm_of = _landmark_lookup(landmarks)
     pending: dict[tuple, list[_Target]] = {}
 
@@ -325,20 +346,21 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         lm = _check_landmarks(lm_of(i), n_m, mesh.n_vertices)
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
         _, a, scaled, _ = unit_area_pair(src_spec, spec)  # the pair's common factor
-        return _Target(i, mesh, scaled, float(a) / a0, lm, time.perf_counter() - t)
+        sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
+        return _Target(i, mesh, scaled, float(a) / a0, lm, sub, time.perf_counter() - t)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
 
     def launch(key, batch: list[_Target]):
         """Dispatch a group (not awaited: the next target's eigensolve runs meanwhile)."""
-        n_b, m_b, p = key
-        cfg = _Config(method, k, k_map, k_spec, n_energies, p, chunk)
+        n_b, m_b, p, s_b = key
+        cfg = _Config(method, k, k_map, k_spec, n_energies, p, chunk, zo_chunk)
         if p not in on_device:
             src_arrays = _cast_tree(dict(rep, **(rep_orient if p == 0 else {})))
             on_device[p] = [jax.device_put(src_arrays, dev) for dev in devices]
         t = time.perf_counter()
-        out = _dispatch(cfg, on_device[p], [_cast_tree(_item_arrays(tg, n_b, m_b))
+        out = _dispatch(cfg, on_device[p], [_cast_tree(_item_arrays(tg, n_b, m_b, s_b))
                                             for tg in batch])
         return batch, out, time.perf_counter() - t
 
@@ -380,7 +402,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 raise
             yield i, exc
             continue
-        key = _bucket_key(tg, pad, tg.landmarks is None)
+        key = _bucket_key(tg, pad, tg.landmarks is None, zoomout_samples)
         pending.setdefault(key, []).append(tg)
         if len(pending[key]) == len(devices):  # one target per device
             launched = launch(key, pending.pop(key))

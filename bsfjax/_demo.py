@@ -113,7 +113,7 @@ def run_demo(out_dir: str | Path | None = "bsfjax-demo", *, levels: int = 3, k: 
     C_gt = timer("ground-truth map", fmap_from_p2p, sm.truncate(k), sn.truncate(k), gt)
     lm = example_landmarks(pair)
     est = timer("map estimation (WKS + landmarks, ZoomOut)", estimate_map, sm, sn, k=k,
-                landmarks=(lm, lm), refine_to=k_refine)
+                landmarks=(lm, lm), refine_to=k_refine, source_mesh=src, target_mesh=tgt)
     map_error = {"estimated": float(geodesic_error(src, np.asarray(fmap_to_p2p(est.C_initial, sm,
                                                                                 sn)), gt)),
                  "refined": float(geodesic_error(src, est.p2p, gt))}

@@ -295,7 +295,7 @@ def _size_schedule(k0: int, k: int, step: int, n_iter: int) -> tuple[int, ...]:
 
 
 def zoomout(C, source_spectrum: Spectrum, target_spectrum: Spectrum, k, *, step: int = 1,
-            adjoint: bool = False, chunk_size: int | None = None) -> jax.Array:
+            samples=None, adjoint: bool = False, chunk_size: int | None = None) -> jax.Array:
     """ZoomOut (Melzi et al. 2019): spectral upsampling of ``C`` from ``k₀`` to ``k``.
 
     Each iteration converts the current map to a point map (:func:`fmap_to_p2p`) and back to a
@@ -308,6 +308,14 @@ def zoomout(C, source_spectrum: Spectrum, target_spectrum: Spectrum, k, *, step:
         k: final size, an int (square map) or ``(k_source, k_target)`` as in pyFM (the map is
             then ``(k_target, k_source)``).
         step: basis functions added per iteration (pyFM's ``step``).
+        samples: ``None`` (every vertex), or ``(source, target)``
+            :class:`~bsfjax.Subsample` s (:func:`bsfjax.subsample`): each iteration then maps
+            the target samples to the nearest source samples and integrates over the target's
+            sample cells, ``C = Φ_N[S_N]ᵀ diag(w) Φ_M[π(S_N)]`` with ``w`` the cell areas (the
+            subsampled ZoomOut of pyFM and of Magnet & Ovsjanikov 2023).  The searches cost
+            ``s_N × s_M`` instead of ``n_N × n_M``.  Measured on 9 FAUST / FAUST_5k pairs with
+            2000 samples per shape: the same point-map accuracy as every vertex (SMPL parts
+            94.30 % vs 94.41 %, ±1 point per pair either way; docs/results.md).
         adjoint, chunk_size: as in :func:`fmap_to_p2p`.
 
     Returns:
@@ -335,10 +343,36 @@ def zoomout(C, source_spectrum: Spectrum, target_spectrum: Spectrum, k, *, step:
     n_iter = max(math.ceil((kn - kn0) / step), math.ceil((km - km0) / step))
     sizes_n = _size_schedule(int(kn0), int(kn), int(step), n_iter)
     sizes_m = _size_schedule(int(km0), int(km), int(step), n_iter)
-    chunk = _chunk_for(source_spectrum.n_vertices, target_spectrum.n_vertices, chunk_size)
-    return _zoomout_jit(C, source_spectrum.evecs[:, :km], target_spectrum.evecs[:, :kn],
-                        target_spectrum.mass, sizes_n=sizes_n, sizes_m=sizes_m, chunk=chunk,
-                        adjoint=bool(adjoint))
+    evecs_m, evecs_n, mass_n = (source_spectrum.evecs[:, :km], target_spectrum.evecs[:, :kn],
+                                target_spectrum.mass)
+    if samples is not None:
+        sub_m, sub_n = _check_samples(samples, source_spectrum.n_vertices,
+                                      target_spectrum.n_vertices)
+        mass_n = sub_n.weights(jnp.asarray(mass_n))
+        evecs_m, evecs_n = jnp.asarray(evecs_m)[sub_m.indices], jnp.asarray(evecs_n)[sub_n.indices]
+    chunk = _chunk_for(evecs_m.shape[0], evecs_n.shape[0], chunk_size)
+    return _zoomout_jit(C, evecs_m, evecs_n, mass_n, sizes_n=sizes_n, sizes_m=sizes_m,
+                        chunk=chunk, adjoint=bool(adjoint))
+
+
+def _check_samples(samples, n_m: int, n_n: int):
+    """``samples`` as two checked :class:`~bsfjax.Subsample` s of ``n_m`` and ``n_n`` vertices."""
+    try:
+        sub_m, sub_n = samples
+        pairs = [(np.asarray(s.indices), np.asarray(s.cells)) for s in (sub_m, sub_n)]
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise BSFError("samples must be (source, target) bsfjax.Subsample s "
+                       "(bsfjax.subsample(mesh, n))") from exc
+    for name, (idx, cells), n in (("source", pairs[0], n_m), ("target", pairs[1], n_n)):
+        if idx.ndim != 1 or idx.size == 0 or cells.shape != (n,) \
+                or not np.issubdtype(idx.dtype, np.integer) \
+                or not np.issubdtype(cells.dtype, np.integer):
+            raise BSFError(f"{name} samples: expected (s,) indices and ({n},) cells of ints, got "
+                           f"{idx.shape} {idx.dtype} and {cells.shape} {cells.dtype}")
+        if idx.min() < 0 or idx.max() >= n or cells.min() < 0 or cells.max() >= idx.size:
+            raise BSFError(f"{name} samples: indices must lie in [0, {n}) and cells in "
+                           f"[0, {idx.size}) (was the subsample made on this mesh?)")
+    return sub_m, sub_n
 
 
 # --------------------------------------------------------------------------- ICP

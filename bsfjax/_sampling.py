@@ -25,6 +25,7 @@ Ties (equal distances) go to the smallest vertex index (``argmax`` semantics).
 from __future__ import annotations
 
 import numbers
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -37,7 +38,7 @@ from ._mesh import Mesh, edge_graph
 from ._spectrum import Spectrum
 from ._validate import pow2_scale
 
-__all__ = ["farthest_point_sampling", "edge_graph", "n_samples"]
+__all__ = ["farthest_point_sampling", "edge_graph", "n_samples", "subsample", "Subsample"]
 
 _METRICS = ("euclidean", "geodesic", "biharmonic")
 #: In "biharmonic", λ_1 and any eigenvalue ``<= ZERO_EIG_RTOL * max(λ)`` count as zero
@@ -101,6 +102,7 @@ _fps_points_jit = jax.jit(_fps_points, static_argnums=2)
 #: pruned loop 28 ms, 33 ms, 82 ms).
 PRUNED_FPS_MIN_POINTS = 12_000
 _FPS_BLOCK = 256  # vertices per block of the running maxima in _fps_pruned
+_FPS_PAD = 512  # the jitted FPS compiles once per multiple of this many points
 
 
 def _fps_pruned(points: np.ndarray, first: int, n: int) -> np.ndarray:
@@ -248,5 +250,58 @@ def farthest_point_sampling(mesh, n, metric: str = "euclidean", seed: int = 0,
     points = points / pow2_scale(np.max(np.abs(points)) if points.size else 0.0)
     if metric != "biharmonic" and n_points >= PRUNED_FPS_MIN_POINTS and count > 1:
         return _fps_pruned(points, first, count)
+    # padded with copies of the first sample (running minimum 0, never picked before a real
+    # point: ties go to the smallest index) so that one compilation serves a range of sizes
+    n_pad = -(-n_points // _FPS_PAD) * _FPS_PAD
+    if n_pad > n_points:
+        points = np.concatenate([points, np.repeat(points[first:first + 1], n_pad - n_points, 0)])
     idx = _fps_points_jit(jnp.asarray(points), jnp.int32(first), count)
     return np.asarray(idx, dtype=np.int64)
+
+
+class Subsample(NamedTuple):
+    """Sample vertices of a shape and the cell of each vertex: a quadrature for integrals
+    over the shape, ``∫ f ≈ Σ_s f(x_s) w_s`` with ``w_s = Σ_{v ∈ cell s} A_v``.
+
+    Attributes:
+        indices: ``(s,)`` int64 sample vertices.
+        cells: ``(n,)`` int64, for every vertex the position in ``indices`` of its nearest
+            sample (Euclidean Voronoi cell; a sample's own cell holds it).
+    """
+
+    indices: np.ndarray
+    cells: np.ndarray
+
+    def weights(self, mass):
+        """``(s,)`` cell areas ``w_s = Σ_{v ∈ cell s} mass_v`` (``mass``: ``(n,)``, jnp ok)."""
+        return jax.ops.segment_sum(mass, jnp.asarray(self.cells), num_segments=len(self.indices))
+
+
+def subsample(mesh, n: int, seed: int = 0) -> Subsample:
+    """``n`` farthest-point samples of ``mesh`` (Euclidean) with their Voronoi cells.
+
+    What :func:`bsfjax.zoomout` runs on instead of every vertex (``samples=``): its
+    nearest-neighbour searches then cost ``s × s`` instead of ``n_N × n_M``, and its functional
+    maps are the quadrature ``Φ_N[S]ᵀ diag(w) Φ_M[π(S)]``.  With ``n`` at least the number of
+    vertices, every vertex is its own sample (``indices = cells = arange(n)``): the exact
+    computation.
+
+    **Arguments:**
+
+    - ``mesh``: a :class:`~bsfjax.Mesh` or ``(N, d)`` points.
+    - ``n``: number of samples, a positive int.
+    - ``seed``: the first sample, as in :func:`farthest_point_sampling`.
+    """
+    import scipy.spatial
+
+    points = _as_points(mesh)
+    n_points = points.shape[0]
+    if isinstance(n, (bool, np.bool_)) or not isinstance(n, numbers.Integral) or n < 1:
+        raise BSFError(f"n must be a positive int, got {n!r}")
+    if n >= n_points:
+        every = np.arange(n_points, dtype=np.int64)
+        return Subsample(every, every.copy())
+    idx = farthest_point_sampling(points, int(n), seed=seed)
+    cells = scipy.spatial.cKDTree(points[idx]).query(points)[1].astype(np.int64)
+    cells[idx] = np.arange(idx.size)  # a sample is in its own cell even among duplicates
+    return Subsample(idx, cells)

@@ -511,6 +511,22 @@ def main(argv: list[str] | None = None) -> int:
     _signals.exit_now(status)  # no interpreter finalization (see _signals)
 
 
+def _use_compilation_cache() -> None:
+    """Keep compiled programs between runs in JAX's persistent compilation cache, so that a
+    second ``bsfjax`` call on meshes of the same sizes skips compilation (most of a short
+    call's time: docs/benchmarks.md).  The folder is ``$XDG_CACHE_HOME/bsfjax/jax`` (default
+    ``~/.cache``); ``JAX_COMPILATION_CACHE_DIR`` chooses another, and setting it empty turns
+    the cache off.  JAX keys entries by the program, its options and the backend."""
+    import os
+
+    if "JAX_COMPILATION_CACHE_DIR" in os.environ:  # JAX reads it itself ('' = off)
+        return
+    import jax
+
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    jax.config.update("jax_compilation_cache_dir", os.path.join(base, "bsfjax", "jax"))
+
+
 def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(_join_option_values(sys.argv[1:] if argv is None else argv))
@@ -518,6 +534,7 @@ def _main(argv: list[str] | None) -> int:
         parser.print_help()
         return 0
     warnings.filterwarnings("ignore", message="JAXopt is no longer maintained")
+    _use_compilation_cache()
     try:
         from ._files import output_transaction
 

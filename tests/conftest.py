@@ -11,6 +11,20 @@ import pytest
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
+def pytest_configure(config):
+    """One persistent JAX compilation cache for the whole run (set before xdist starts its
+    workers, so they, the notebook kernels and the CLI subprocesses share it), outside the
+    user's own cache folder."""
+    import os
+    import tempfile
+
+    folder = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR",
+                                   os.path.join(tempfile.gettempdir(), "bsfjax-tests-jax-cache"))
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", folder)
+
+
 def data_path(*parts: str) -> Path:
     """Path of a file in the shared data folder, or skip the test with the reason."""
     p = DATA.joinpath(*parts)

@@ -33,8 +33,9 @@ def collection():
     lm_src = [0, 100, 200, 300]
     lm = {1: (lm_src, lm_src)}  # levels keep the coarse vertices first: vertex i ↔ vertex i
     targets = [small.target, large.target]
+    # ZoomOut on 300 samples of each shape: the samples are padded with the vertices
     res = dict(transfer_collection(small.source, small.labels, targets, method="refined", k=10,
-                                   landmarks=lambda i: lm.get(i)))
+                                   landmarks=lambda i: lm.get(i), zoomout_samples=300))
     return small, targets, lm, res
 
 
@@ -48,7 +49,8 @@ def test_padded_targets_equal_the_one_pair_path(collection):
     for i, t in enumerate(targets):
         sn = bsfjax.spectrum(t, 100)
         est = bsfjax.estimate_map(sm.truncate(20), sn.truncate(20), k=10, refine_to=20,
-                                  landmarks=lm.get(i), source_mesh=small.source, target_mesh=t)
+                                  landmarks=lm.get(i), source_mesh=small.source, target_mesh=t,
+                                  zoomout_samples=300)
         res = bsfjax.transfer_labels(sm, sn, small.labels, C=est.C, p2p=est.p2p,
                                      mesh=small.source)
         assert padded[i].labels.shape == padded[i].p2p.shape == (t.n_vertices,)

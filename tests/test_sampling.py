@@ -216,3 +216,19 @@ def test_bad_inputs(bumpy_sphere, cloud):
     with pytest.raises(BSFError, match="non-zero eigenvalue"):
         farthest_point_sampling(np.zeros((50, 1)), 3, metric="biharmonic",
                                 spectrum=bsfjax.interval_spectrum(50, 1))
+
+
+def test_subsample_cells_are_the_nearest_samples(cloud):
+    sub = bsfjax.subsample(cloud, 37, seed=2)
+    np.testing.assert_array_equal(sub.indices, farthest_point_sampling(cloud, 37, seed=2))
+    d = np.linalg.norm(cloud[:, None] - cloud[None, sub.indices], axis=-1)
+    np.testing.assert_array_equal(sub.cells, d.argmin(axis=1))  # float64 Voronoi cells
+    np.testing.assert_array_equal(sub.cells[sub.indices], np.arange(37))
+    w = np.asarray(sub.weights(np.ones(len(cloud))))
+    np.testing.assert_array_equal(w, np.bincount(sub.cells, minlength=37))
+    every = bsfjax.subsample(cloud, 10_000)  # more samples than points: every point
+    np.testing.assert_array_equal(every.indices, np.arange(len(cloud)))
+    np.testing.assert_array_equal(every.cells, np.arange(len(cloud)))
+    for bad in (0, -3, 2.5, True):
+        with pytest.raises(BSFError, match="positive int"):
+            bsfjax.subsample(cloud, bad)
