@@ -15,7 +15,8 @@ Sets (meshes from ../shared/data, read by path, nothing copied into the reposito
   vertices); a 12-part Voronoi partition of the source, timing only.
 
 For each set: the wall time of one call and of the separate calls (each a fresh process, as a
-user runs them), the accuracy of both, and in one process the seconds per target once
+user runs them, JAX's persistent compilation cache off), the accuracy of both, the two again
+with a warm compilation cache (the second of two rounds), and in one process the seconds per target once
 compiled (a second pass) with the number of compilations of the first pass.
 ``--quick``: the ``six`` set only.
 """
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -114,10 +116,15 @@ def make_tosca(folder: Path):
     return src, folder / "tosca_labels.txt", targets
 
 
-def cli(*args) -> tuple[float, str]:
+#: every bsfjax call of the comparison starts cold: JAX's persistent compilation cache is off
+#: (the ``bsfjax`` command uses one by default); the warm-cache figures set their own folder
+COLD = {**os.environ, "JAX_COMPILATION_CACHE_DIR": ""}
+
+
+def cli(*args, env=None) -> tuple[float, str]:
     t = time.perf_counter()
     r = subprocess.run([sys.executable, "-m", "bsfjax.cli", *map(str, args)], capture_output=True,
-                       text=True)
+                       text=True, env=COLD if env is None else env)
     if r.returncode != 0:
         raise RuntimeError(r.stderr[-2000:])
     return time.perf_counter() - t, r.stderr
@@ -147,7 +154,16 @@ def measure(name, source, labels_file, targets, folder: Path, truth: bool, k: in
             tr = np.loadtxt(folder / "truth" / f"{p.stem}.txt", dtype=int)
             acc_sep.append(accuracy(np.loadtxt(out_sep / f"{p.stem}.txt", dtype=int), tr, p))
             acc_one.append(row["accuracy"])
+    # the same two ways with a warm compilation cache (a second run of the same commands)
+    warm = {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(folder / f"{name}_jax_cache")}
+    for rnd in (1, 2):
+        w1, _ = cli("transfer", source, *targets, "--labels", labels_file, "--out-dir",
+                    folder / f"{name}_warm{rnd}", "-k", k, "--no-progress", env=warm)
+        ws = sum(cli("transfer", source, p, "--labels", labels_file, "--out",
+                     folder / f"{name}_warm{rnd}_{p.stem}.txt", "-k", k, env=warm)[0]
+                 for p in targets)
     steady = in_process(source, labels_file, targets, k)
+    steady.update(wall_one_call_warm_cache_s=w1, wall_separate_calls_warm_cache_s=ws)
     if name == "six":
         steady["kill_and_resume"] = kill_and_resume(source, labels_file, targets, folder,
                                                     out_one, k)
@@ -169,14 +185,14 @@ def kill_and_resume(source, labels_file, targets, folder: Path, reference: Path,
     out = folder / "killed"
     argv = [sys.executable, "-m", "bsfjax.cli", "transfer", str(source), *map(str, targets),
             "--labels", str(labels_file), "--out-dir", str(out), "-k", str(k), "--no-progress"]
-    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=COLD)
     while proc.poll() is None and len(list(out.glob("*.txt"))) < 2:
         time.sleep(0.05)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     done_before = sorted(p.name for p in out.glob("*.txt"))
     leftovers = [p.name for p in out.iterdir() if p.name.startswith(".")]
-    r = subprocess.run(argv, capture_output=True, text=True)
+    r = subprocess.run(argv, capture_output=True, text=True, env=COLD)
     line = next(ln for ln in r.stderr.splitlines() if "complete (skipped)" in ln)
     same = all((out / f"{p.stem}.txt").read_bytes() == (reference / f"{p.stem}.txt").read_bytes()
                for p in targets)
@@ -205,7 +221,7 @@ for p in (1, 2):
                   vertices=[res[i].n_vertices for i in range(len(targets))])
 print(json.dumps(out))
 """
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=COLD)
     if r.returncode != 0:
         raise RuntimeError(r.stderr[-2000:])
     out = json.loads(r.stdout.strip().splitlines()[-1])
@@ -246,8 +262,9 @@ def main() -> None:
             print(json.dumps(r), flush=True)
     (out / "collection.json").write_text(json.dumps(rows, indent=1) + "\n")
     lines = ["| set | targets | vertices | one call | separate calls | speed-up | s/target "
-             "compiled | s/5K target | compilations | accuracy one / separate |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "compiled | s/5K target | compilations | accuracy one / separate | warm "
+             "compilation cache: one / separate |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         acc = (f"{100 * r['accuracy_one_call']:.2f} / {100 * r['accuracy_separate']:.2f} %"
                if "accuracy_one_call" in r else "—")
@@ -257,7 +274,8 @@ def main() -> None:
                      f"**{r['speedup']:.2f}×** | {r['seconds_per_target_compiled']:.2f} s | "
                      f"{'—' if s5k is None else f'{s5k:.2f} s'} | "
                      f"{r['compilations_first_pass']} (then {r['compilations_second_pass']}) | "
-                     f"{acc} |")
+                     f"{acc} | {r['wall_one_call_warm_cache_s']:.1f} s / "
+                     f"{r['wall_separate_calls_warm_cache_s']:.1f} s |")
     (out / "collection.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

@@ -33,6 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._buckets import BUCKET_FACTORS, size_bucket
 from ._descriptors import _wks_jit
 from ._errors import BSFError
 from ._estimation import FmapWeights, _cast, _energy, _geometry, _Geometry, _setup, _Shape, \
@@ -49,22 +50,6 @@ from ._spectrum import Spectrum, spectrum, unit_area, unit_area_pair
 from ._validate import check_int, compact_labels
 
 __all__ = ["transfer_collection", "TargetTransfer", "size_bucket", "BUCKET_FACTORS"]
-
-#: Bucket sizes are ``c · 2^j`` for ``c`` in these factors: neighbouring sizes differ by at
-#: most 1.5×, so padding adds at most 50 % (about 20 % on average) and a collection of
-#: 3.4K–6.9K-vertex targets compiles the kernel for 2 or 3 sizes.
-BUCKET_FACTORS = (4, 6)
-
-
-def size_bucket(n: int) -> int:
-    """The smallest ``c · 2^j ≥ n`` with ``c`` in :data:`BUCKET_FACTORS` (``n ≥ 1``)."""
-    j = max(0, int(n).bit_length() - 4)
-    while True:
-        for c in BUCKET_FACTORS:
-            if c << j >= n:
-                return c << j
-        j += 1
-
 
 class TargetTransfer(NamedTuple):
     """The result for one target of :func:`transfer_collection`."""

@@ -33,6 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph
 
+from ._buckets import size_bucket
 from ._errors import BSFError
 from ._mesh import Mesh, edge_graph
 from ._spectrum import Spectrum
@@ -102,7 +103,6 @@ _fps_points_jit = jax.jit(_fps_points, static_argnums=2)
 #: pruned loop 28 ms, 33 ms, 82 ms).
 PRUNED_FPS_MIN_POINTS = 12_000
 _FPS_BLOCK = 256  # vertices per block of the running maxima in _fps_pruned
-_FPS_PAD = 512  # the jitted FPS compiles once per multiple of this many points
 
 
 def _fps_pruned(points: np.ndarray, first: int, n: int) -> np.ndarray:
@@ -250,9 +250,9 @@ def farthest_point_sampling(mesh, n, metric: str = "euclidean", seed: int = 0,
     points = points / pow2_scale(np.max(np.abs(points)) if points.size else 0.0)
     if metric != "biharmonic" and n_points >= PRUNED_FPS_MIN_POINTS and count > 1:
         return _fps_pruned(points, first, count)
-    # padded with copies of the first sample (running minimum 0, never picked before a real
-    # point: ties go to the smallest index) so that one compilation serves a range of sizes
-    n_pad = -(-n_points // _FPS_PAD) * _FPS_PAD
+    # padded to a size bucket with copies of the first sample (running minimum 0, never
+    # picked before a real point: ties go to the smallest index): one compilation per bucket
+    n_pad = size_bucket(n_points)
     if n_pad > n_points:
         points = np.concatenate([points, np.repeat(points[first:first + 1], n_pad - n_points, 0)])
     idx = _fps_points_jit(jnp.asarray(points), jnp.int32(first), count)
