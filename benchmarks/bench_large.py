@@ -185,7 +185,8 @@ def run(data: Path, levels: int, k: int, n_functions: int, cache: Path, sparsity
                                                              frame.atom_segments))
     result = {
         "mesh": f"tosca/cat/cat0.off -> cat6.off, Loop x{levels}"
-                + (f", decimated to {decimate} (fast_simplification, replayed)" if decimate else ""),
+                + (f", decimated to {decimate} (fast_simplification, replayed)"
+                   if decimate else ""),
         "n_vertices": n, "n_faces": int(src_mesh.faces.shape[0]), "k": k,
         "spectrum_method": method, "fraction": fraction, "n_atoms": q,
         "n_functions": n_functions,

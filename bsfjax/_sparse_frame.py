@@ -51,8 +51,8 @@ from ._memory import release_free_memory
 from ._packed_lists import SEGMENT_BITS, decode_host, decode_traced, n_segments, pack_lists
 from ._operator import AbstractFrame
 
-__all__ = ["SparseFrame", "sparse_atoms", "sparse_atom_lists", "ell_matmul", "ell_rmatmul", "sparse_gram",
-           "AtomVertices", "atom_vertices", "atom_sums", "ell_gram_rows"]
+__all__ = ["SparseFrame", "sparse_atoms", "sparse_atom_lists", "ell_matmul", "ell_rmatmul",
+           "sparse_gram", "AtomVertices", "atom_vertices", "atom_sums", "ell_gram_rows"]
 
 #: Kernel values per column block of the build (``n × block`` live at a time).
 _BUILD_ELEMS = 2**24
@@ -243,8 +243,9 @@ def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
 
 
 def sparse_atom_lists(evecs, coeffs, gammas):
-    """``(n, D)`` packed atom lists and their segments (:mod:`bsfjax._packed_lists`) of ``B = [|g| ≥ γ · max_v |g|]`` for ``g = evecs @ coeffs`` (the
-    rule of :func:`bsfjax._binarize.kernel_mask`), never forming the ``(n, q)`` matrix.
+    """``(n, D)`` packed atom lists and their segments (:mod:`bsfjax._packed_lists`) of
+    ``B = [|g| ≥ γ · max_v |g|]`` for ``g = evecs @ coeffs`` (the rule of
+    :func:`bsfjax._binarize.kernel_mask`), never forming the ``(n, q)`` matrix.
 
     One pass over blocks of whole columns (atoms), ``n × cb ≈ 2²⁴`` kernel values each: the
     device computes a block's mask (and its column maxima) while the host turns the previous
@@ -257,7 +258,7 @@ def sparse_atom_lists(evecs, coeffs, gammas):
     int32 or ``None`` (``q < 2¹⁶``).
     """
     # what earlier stages freed but glibc kept (e.g. XLA's input conversions: 0.3–0.6 GiB at
-    # 445K vertices) goes back before the lists take their ~n·D·4 bytes
+    # 445K vertices) goes back before the lists take their ~n·D·2 bytes
     release_free_memory()
     evecs, coeffs, gammas = jnp.asarray(evecs), jnp.asarray(coeffs), jnp.asarray(gammas)
     n, q = evecs.shape[0], coeffs.shape[1]
