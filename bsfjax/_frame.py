@@ -35,7 +35,8 @@ from ._frame_tools import (ADAPTIVE_AREA_RANGE, ADAPTIVE_N_SCALES, _check_center
                            _check_gammas, _check_spectrum, _check_taus, _concrete, adaptive_taus,
                            prune_frame, unique_atoms)
 from ._operator import DENSE_BUDGET_BYTES, TAU_CONVENTIONS, AbstractFrame
-from ._sparse_frame import SparseFrame, sparse_atoms
+from ._packed_lists import pack_lists
+from ._sparse_frame import SparseFrame, sparse_atom_lists
 from ._spectrum import Spectrum
 
 __all__ = ["Frame", "AbstractFrame", "build_frame", "transfer_frame", "adaptive_taus",
@@ -138,7 +139,8 @@ def build_frame(spectrum: Spectrum, centers: Int[ArrayLike, " c"],
                              jnp.asarray(spectrum.mass, dtype), jnp.asarray(c), jnp.asarray(t, dtype),
                              tau_convention == "unit_area")
         gcols = jnp.repeat(jnp.asarray(g, dtype), n_c)
-        frame = SparseFrame(atom_lists=sparse_atoms(evecs, coeffs, gcols), coeffs=coeffs,
+        lists, seg = sparse_atom_lists(evecs, coeffs, gcols)
+        frame = SparseFrame(atom_lists=lists, atom_segments=seg, coeffs=coeffs,
                             taus=jnp.repeat(jnp.asarray(t), n_c),
                             centers=jnp.tile(jnp.asarray(c), n_s),
                             mass=jnp.asarray(spectrum.mass), gammas=gcols,
@@ -250,14 +252,17 @@ def transfer_frame(frame: AbstractFrame, C: Float[ArrayLike, "kN kM"],
 def _to_sparse(frame: Frame, with_atoms: bool) -> SparseFrame:
     """The same frame as lists (host; concrete frames), or only its column data."""
     q = frame.n_atoms
-    lists = np.full((0, 1), q, np.int32)
+    lists, seg = np.full((0, 1), q, np.int32), None
     if with_atoms:
         B = np.asarray(frame.atoms) != 0
         width = max(1, int(B.sum(axis=1).max(initial=0)))
         lists = np.full((B.shape[0], width), q, np.int32)
         r, c = np.nonzero(B)
         lists[r, np.arange(r.size) - np.searchsorted(r, r)] = c
-    return SparseFrame(atom_lists=jnp.asarray(lists), coeffs=frame.coeffs, taus=frame.taus,
+        lists, seg = pack_lists(lists, q)
+        seg = None if seg is None else jnp.asarray(seg)
+    return SparseFrame(atom_lists=jnp.asarray(lists), atom_segments=seg, coeffs=frame.coeffs,
+                       taus=frame.taus,
                        centers=frame.centers, mass=frame.mass, gammas=frame.gammas,
                        tau_convention=frame.tau_convention, columns=frame.columns)
 

@@ -9,6 +9,9 @@ vertex ``v``, the sorted list of atoms that contain it, padded with ``q`` to a c
 
     atom_lists[v, d] = j_d(v)  (j_1 < j_2 < … , then q … q)       B_vj = 1  ⇔  j ∈ atom_lists[v]
 
+stored in 16 bits (:mod:`bsfjax._packed_lists`: the low bits, plus per vertex where each
+``2¹⁶`` block of atom indices starts when ``q ≥ 2¹⁶``), half the memory of int32.
+
 On real meshes ``D`` is close to the mean row count (each vertex is covered by about the same
 number of atoms; max/mean ≈ 1.3 on the TOSCA cat, ≈ 2 on FAUST), so the padding wastes
 little, whereas per-atom lists would pad every atom to the largest one (10× the mean).  Products (chunked over vertex
@@ -45,10 +48,11 @@ from ._binarize import mask_block
 from ._errors import BSFError
 from ._gram_rows import host_callback_dtype, join64, split64
 from ._memory import release_free_memory
+from ._packed_lists import SEGMENT_BITS, decode_host, decode_traced, n_segments, pack_lists
 from ._operator import AbstractFrame
 
-__all__ = ["SparseFrame", "sparse_atoms", "ell_matmul", "ell_rmatmul", "sparse_gram",
-           "AtomVertices", "atom_vertices", "atom_sums", "ell_gram_rows"]
+__all__ = ["SparseFrame", "sparse_atoms", "sparse_atom_lists", "ell_matmul", "ell_rmatmul",
+           "sparse_gram", "AtomVertices", "atom_vertices", "atom_sums", "ell_gram_rows"]
 
 #: Kernel values per column block of the build (``n × block`` live at a time).
 _BUILD_ELEMS = 2**24
@@ -62,10 +66,13 @@ class SparseFrame(AbstractFrame):
     Same fields and column order as :class:`bsfjax.Frame` except ``atoms``:
 
     Attributes:
-        atom_lists: ``(n, D)`` int32, the atoms containing each vertex in increasing order,
-            padded with ``q``.
+        atom_lists: ``(n, D)``, the atoms containing each vertex in increasing order, padded
+            with ``q``: uint16 as built, their low 16 bits when ``atom_segments`` is given
+            (:mod:`bsfjax._packed_lists`); any integer dtype for hand-made lists.
         coeffs: ``(k, q)`` spectral coefficients of each atom's kernel.
         taus, centers, mass, gammas, tau_convention, columns: as in :class:`bsfjax.Frame`.
+        atom_segments: ``(n, S)`` int32, ``S = q >> 16``, or ``None`` (``q < 2¹⁶`` or plain
+            lists): per vertex, the number of its atoms below ``(h + 1) · 2¹⁶``.
     """
 
     atom_lists: Int[Array, "n D"]
@@ -76,6 +83,7 @@ class SparseFrame(AbstractFrame):
     gammas: Float[Array, " q"] | None = None
     tau_convention: str = eqx.field(static=True, default="unit_area")
     columns: Int[Array, " q"] | None = None
+    atom_segments: Int[Array, "n S"] | None = None
 
     @property
     def n_vertices(self) -> int:
@@ -92,21 +100,29 @@ class SparseFrame(AbstractFrame):
     @property
     def nnz(self) -> int:
         """Number of ones of ``B``."""
-        return int(np.asarray(_block_counts(self.atom_lists, self.n_atoms)).sum(dtype=np.int64))
+        return int(np.asarray(_block_counts(self.atom_lists, self.n_atoms, self.atom_segments)
+                              ).sum(dtype=np.int64))
+
+    def host_lists(self, rows=slice(None)) -> np.ndarray:
+        """int32 atom lists of ``rows`` on the host, decoded (:mod:`bsfjax._packed_lists`)."""
+        seg = self.atom_segments
+        return decode_host(np.asarray(self.atom_lists)[rows],
+                           None if seg is None else np.asarray(seg)[rows])
 
     # ---------------------------------------------------------------- products
 
     def apply(self, alpha):
-        return ell_matmul(self.atom_lists, alpha.T).T
+        return ell_matmul(self.atom_lists, alpha.T, self.atom_segments).T
 
     def apply_transpose(self, y, w=None):
-        return ell_rmatmul(self.atom_lists, (y if w is None else y * w).T, self.n_atoms).T
+        return ell_rmatmul(self.atom_lists, (y if w is None else y * w).T, self.n_atoms,
+                           self.atom_segments).T
 
     def column_norms2(self, w=None):
         n = self.n_vertices
         ones = jnp.ones((n, 1), self.dtype if w is None else w.dtype)
         return ell_rmatmul(self.atom_lists, ones if w is None else w[:, None],
-                           self.n_atoms)[:, 0]
+                           self.n_atoms, self.atom_segments)[:, 0]
 
     def gram(self, w=None):
         """``BᵀWB`` dense, from the host CSR product (:func:`sparse_gram`) through a callback;
@@ -118,11 +134,15 @@ class SparseFrame(AbstractFrame):
                            "ErrorOMP ('omp', 'omp_error') for frames this large")
         dtype = self.dtype if w is None else jnp.result_type(self.dtype, w)
 
-        def host(lists, w):
-            Bs = _lists_to_scipy(np.asarray(lists), q, None if w is None else np.asarray(w))
+        from ._sparse_gram import _lists_to_scipy
+
+        def host(lists, seg, w):
+            Bs = _lists_to_scipy(np.asarray(lists), q, None if w is None else np.asarray(w),
+                                 None if seg is None else np.asarray(seg))
             return split64((Bs.T @ Bs).toarray(), dtype)
 
-        out = jax.pure_callback(host, host_callback_dtype((q, q), dtype), self.atom_lists, w)
+        out = jax.pure_callback(host, host_callback_dtype((q, q), dtype), self.atom_lists,
+                                self.atom_segments, w)
         return join64(out, dtype)
 
     def gram_rows(self, ks, w=None):
@@ -131,6 +151,8 @@ class SparseFrame(AbstractFrame):
 
     def host_gram_source(self, w, n_rows: int):
         """Always: rows from the lists and their 16-bit transpose (:class:`EllGramSource`)."""
+        from ._sparse_gram import EllGramSource
+
         return EllGramSource(self, None if w is None else np.asarray(w, np.float64))
 
     # ---------------------------------------------------------------- structure
@@ -139,27 +161,30 @@ class SparseFrame(AbstractFrame):
         """The ``(n, q)`` 0/1 matrix ``B`` (only for frames that fit in memory)."""
         dtype = dtype or jax.dtypes.canonicalize_dtype(jnp.float64)
         n, q = self.n_vertices, self.n_atoms
-        rows = jnp.broadcast_to(jnp.arange(n)[:, None], self.atom_lists.shape)
-        return jnp.zeros((n, q + 1), dtype).at[rows, self.atom_lists].set(1)[:, :q]
+        lists = decode_traced(self.atom_lists, self.atom_segments)
+        rows = jnp.broadcast_to(jnp.arange(n)[:, None], lists.shape)
+        return jnp.zeros((n, q + 1), dtype).at[rows, lists].set(1)[:, :q]
 
     def atom_columns(self, js) -> np.ndarray:
         """Dense 0/1 columns ``B[:, js]`` ``(n, len(js))`` (host; ``O(n · D)`` per column)."""
-        lists = np.asarray(self.atom_lists)
+        lists = self.host_lists()
         return np.stack([(lists == int(j)).any(axis=1) for j in np.atleast_1d(js)],
                         axis=1).astype(np.float32)
 
     def supports_equal(self, a, b):
         """From the transpose of the lists (:func:`atom_vertices`): ``O(nnz)`` once."""
-        av = atom_vertices(self.atom_lists, self.n_atoms)
+        av = atom_vertices(self.atom_lists, self.n_atoms, self.atom_segments)
         return np.array([np.array_equal(av.vertices(int(i)), av.vertices(int(j)))
                          for i, j in zip(np.asarray(a), np.asarray(b))], bool)
 
     def support_hashes(self, r):
-        return ell_rmatmul(self.atom_lists, jnp.asarray(r, jnp.uint32).T, self.n_atoms).T
+        return ell_rmatmul(self.atom_lists, jnp.asarray(r, jnp.uint32).T, self.n_atoms,
+                           self.atom_segments).T
 
     def nonempty(self):
         n = self.n_vertices
-        return ell_rmatmul(self.atom_lists, jnp.ones((n, 1), jnp.int32), self.n_atoms)[:, 0] > 0
+        return ell_rmatmul(self.atom_lists, jnp.ones((n, 1), jnp.int32), self.n_atoms,
+                           self.atom_segments)[:, 0] > 0
 
     def select_columns(self, cols, columns=None):
         """Columns ``cols`` (increasing): the lists renumbered, dropped atoms moved to the
@@ -169,50 +194,58 @@ class SparseFrame(AbstractFrame):
         q = self.n_atoms
         new = np.full(q + 1, cols.size, np.int32)
         new[cols] = np.arange(cols.size, dtype=np.int32)
-        lists = np.sort(new[np.asarray(self.atom_lists)], axis=1)
+        lists = np.sort(new[self.host_lists()], axis=1)
         width = max(1, int((lists < cols.size).sum(axis=1).max(initial=0)))
-        return SparseFrame(atom_lists=jnp.asarray(np.ascontiguousarray(lists[:, :width])),
+        lists, seg = pack_lists(lists[:, :width], cols.size)
+        return SparseFrame(atom_lists=jnp.asarray(lists), atom_segments=_device(seg),
                            coeffs=self.coeffs[:, cols], taus=self.taus[cols],
                            centers=self.centers[cols], mass=self.mass,
                            gammas=None if self.gammas is None else self.gammas[cols],
                            tau_convention=self.tau_convention, columns=columns)
 
     def pull_back(self, p2p, coeffs, mass):
+        seg = self.atom_segments
         return SparseFrame(atom_lists=jnp.asarray(self.atom_lists)[p2p], coeffs=coeffs,
+                           atom_segments=None if seg is None else jnp.asarray(seg)[p2p],
                            taus=self.taus, centers=self.centers, mass=mass, gammas=self.gammas,
                            tau_convention=self.tau_convention, columns=self.columns)
 
     def rebinarized(self, evecs, coeffs, mass):
         dtype = coeffs.dtype
         ev = jnp.asarray(evecs[:, :coeffs.shape[0]], dtype)  # one (n, k_N) copy, not two
-        return SparseFrame(atom_lists=sparse_atoms(ev, coeffs, self.gammas), coeffs=coeffs,
+        lists, seg = sparse_atom_lists(ev, coeffs, self.gammas)
+        return SparseFrame(atom_lists=lists, atom_segments=seg, coeffs=coeffs,
                            taus=self.taus, centers=self.centers, mass=mass, gammas=self.gammas,
                            tau_convention=self.tau_convention, columns=self.columns)
 
     def to_scipy(self, weights=None) -> sp.csr_matrix:
         """``B`` (or ``diag(√w) B`` with ``weights``) as a float64 scipy CSR matrix (host)."""
+        from ._sparse_gram import _lists_to_scipy
+
+        seg = self.atom_segments
         return _lists_to_scipy(np.asarray(self.atom_lists), self.n_atoms,
-                               None if weights is None else np.asarray(weights, np.float64))
+                               None if weights is None else np.asarray(weights, np.float64),
+                               None if seg is None else np.asarray(seg))
 
 
-def _lists_to_scipy(lists: np.ndarray, q: int, weights) -> sp.csr_matrix:
-    n = lists.shape[0]
-    valid = lists < q
-    counts = valid.sum(axis=1)
-    indptr = np.zeros(n + 1, np.int64)
-    np.cumsum(counts, out=indptr[1:])
-    data = np.ones(int(indptr[-1]))
-    if weights is not None:
-        data = np.repeat(np.sqrt(np.asarray(weights, np.float64)), counts)
-    return sp.csr_matrix((data, lists[valid], indptr), shape=(n, q))
+def _device(seg):
+    return None if seg is None else jnp.asarray(seg)
 
 
 # --------------------------------------------------------------------------- build
 
 
 def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
-    """``(n, D)`` atom lists of ``B = [|g| ≥ γ · max_v |g|]`` for ``g = evecs @ coeffs`` (the
-    rule of :func:`bsfjax._binarize.kernel_mask`), never forming the ``(n, q)`` matrix.
+    """The int32 ``(n, D)`` lists of :func:`sparse_atom_lists`, decoded (twice the memory of
+    the packed lists the frames keep)."""
+    lists, seg = sparse_atom_lists(evecs, coeffs, gammas)
+    return jnp.asarray(decode_host(np.asarray(lists), None if seg is None else np.asarray(seg)))
+
+
+def sparse_atom_lists(evecs, coeffs, gammas):
+    """``(n, D)`` packed atom lists and their segments (:mod:`bsfjax._packed_lists`) of
+    ``B = [|g| ≥ γ · max_v |g|]`` for ``g = evecs @ coeffs`` (the rule of
+    :func:`bsfjax._binarize.kernel_mask`), never forming the ``(n, q)`` matrix.
 
     One pass over blocks of whole columns (atoms), ``n × cb ≈ 2²⁴`` kernel values each: the
     device computes a block's mask (and its column maxima) while the host turns the previous
@@ -220,10 +253,12 @@ def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
     vertex's list (:class:`_ListBuilder`); blocks come in increasing atom order, so the lists
     stay sorted.  ``evecs`` ``(n, k)``, ``coeffs`` ``(k, q)``, ``gammas`` ``(q,)``; concrete
     arrays (``D`` is data dependent).  An all-zero frame gets ``D = 1`` (every entry ``q``).
-    Peak host memory: the final lists plus one vertex chunk (see :class:`_ListBuilder`).
+    Peak host memory: the final (16-bit) lists plus one vertex chunk (see
+    :class:`_ListBuilder`).  Returns ``(lists, segments)``: uint16 ``(n, D)`` and ``(n, S)``
+    int32 or ``None`` (``q < 2¹⁶``).
     """
     # what earlier stages freed but glibc kept (e.g. XLA's input conversions: 0.3–0.6 GiB at
-    # 445K vertices) goes back before the lists take their ~n·D·4 bytes
+    # 445K vertices) goes back before the lists take their ~n·D·2 bytes
     release_free_memory()
     evecs, coeffs, gammas = jnp.asarray(evecs), jnp.asarray(coeffs), jnp.asarray(gammas)
     n, q = evecs.shape[0], coeffs.shape[1]
@@ -247,11 +282,11 @@ def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
         pending = (b, mask)
     collect(*pending)
     del pending, mask
-    out = lists.finish()
+    out, seg = lists.finish_packed()
     release_free_memory()  # the per-block temporaries (see bsfjax._memory)
     # The aligned host buffer becomes the device array without a copy on CPU (device_put
     # aliases 64-byte aligned numpy memory); jnp.asarray would copy it.
-    return jax.device_put(out)
+    return jax.device_put(out), _device(seg)
 
 
 #: Vertex chunks of the lists under construction (each grows on its own; see _ListBuilder).
@@ -271,7 +306,8 @@ def _aligned_empty(shape, dtype, align: int = 64) -> np.ndarray:
 
 
 class _ListBuilder:
-    """Per-vertex sorted atom lists built by appending, with no growth copies of the whole.
+    """Per-vertex sorted atom lists built by appending, with no growth copies of the whole,
+    in 16 bits (:mod:`bsfjax._packed_lists`; ``segments`` counted as the atoms arrive).
 
     The final width ``D`` (the largest count) is known only after the last block, and
     re-padding one ``(n, W)`` array each time ``W`` grows would hold two copies.  So the
@@ -286,14 +322,20 @@ class _ListBuilder:
         self.n, self.q = n, q
         step = max(1, -(-n // _BUILD_CHUNKS))
         self.bounds = np.append(np.arange(0, n, step), n)
-        self.chunks = [np.full((0, e - s), q, np.int32)
+        self.pad = q & ((1 << SEGMENT_BITS) - 1)  # the padding q, packed
+        self.chunks = [np.full((0, e - s), self.pad, np.uint16)
                        for s, e in zip(self.bounds[:-1], self.bounds[1:])]
         self.fill = np.zeros(n, np.int64)  # entries stored per vertex so far
+        self.seg = np.zeros((n, n_segments(q)), np.int32)
 
     def append(self, r: np.ndarray, c: np.ndarray) -> None:
         """Append atoms ``c`` to vertices ``r`` (``r`` nondecreasing, ``c`` larger than every
         atom stored so far, increasing within each vertex)."""
         cnt = np.bincount(r, minlength=self.n)
+        for h in range(self.seg.shape[1]):  # atoms arrive in increasing blocks: the last block
+            below = c < ((h + 1) << SEGMENT_BITS)  # with atoms below a bound sets its count
+            if below.any():
+                self.seg[:, h] = self.fill + np.bincount(r[below], minlength=self.n)
         first = np.cumsum(cnt) - cnt  # index in r of each vertex's first entry
         slot = self.fill[r] + np.arange(r.size) - first[r]
         cuts = np.searchsorted(r, self.bounds)
@@ -303,7 +345,7 @@ class _ListBuilder:
             need = int(slot[a:b].max()) + 1
             if need > self.chunks[i].shape[0]:
                 self._grow(i, max(need, self.chunks[i].shape[0] + _GROW_SLOTS))
-            self.chunks[i][slot[a:b], r[a:b] - self.bounds[i]] = c[a:b]
+            self.chunks[i][slot[a:b], r[a:b] - self.bounds[i]] = c[a:b] & 0xFFFF
         self.fill += cnt
 
     def _grow(self, i: int, slots: int) -> None:
@@ -311,20 +353,29 @@ class _ListBuilder:
         old = chunk.shape[0]
         # the chunk is private to this builder (no views exist), so resizing in place is safe
         chunk.resize((slots, chunk.shape[1]), refcheck=False)
-        chunk[old:] = self.q
+        chunk[old:] = self.pad
 
     def finish(self) -> np.ndarray:
         """The ``(n, D)`` int32 lists, 64-byte aligned; the builder is emptied."""
+        lists, seg = self.finish_packed()
+        out = _aligned_empty(lists.shape, np.int32)
+        out[...] = decode_host(lists, seg)
+        return out
+
+    def finish_packed(self):
+        """``(lists, segments)``: the ``(n, D)`` uint16 lists, 64-byte aligned, and the
+        ``(n, S)`` segments or ``None``; the builder is emptied."""
         width = max(1, int(self.fill.max(initial=0)))
-        out = _aligned_empty((self.n, width), np.int32)
+        out = _aligned_empty((self.n, width), np.uint16)
         for i, (s, e) in enumerate(zip(self.bounds[:-1], self.bounds[1:])):
             chunk, self.chunks[i] = self.chunks[i], None
             have = min(width, chunk.shape[0])
             for v in range(0, e - s, 256):  # transpose in column panels (cache friendly)
                 out[s + v:s + min(v + 256, e - s), :have] = chunk[:have, v:v + 256].T
-            out[s:e, have:] = self.q
+            out[s:e, have:] = self.pad
             del chunk  # freed before the next chunk is written
-        return out
+        seg, self.seg = self.seg, None
+        return out, (seg if seg.shape[1] else None)
 
 
 # --------------------------------------------------------------------------- products
@@ -341,9 +392,17 @@ def _block_start(i, nb: int, n: int):
     return jnp.minimum(i * nb, n - nb)
 
 
+def _rows(atom_lists, segments, s, nb: int):
+    """int32 atoms of rows ``s … s + nb`` (decoded from the packed lists)."""
+    rows = jax.lax.dynamic_slice_in_dim(atom_lists, s, nb)
+    seg = None if segments is None else jax.lax.dynamic_slice_in_dim(segments, s, nb)
+    return decode_traced(rows, seg)
+
+
 @jax.jit
-def ell_matmul(atom_lists: jax.Array, X: jax.Array) -> jax.Array:
-    """``B X``: ``(n, m)`` from ``X`` ``(q, m)`` (gather-sum over each vertex's atoms)."""
+def ell_matmul(atom_lists: jax.Array, X: jax.Array, segments=None) -> jax.Array:
+    """``B X``: ``(n, m)`` from ``X`` ``(q, m)`` (gather-sum over each vertex's atoms);
+    ``segments`` of packed lists (:mod:`bsfjax._packed_lists`) or ``None``."""
     n, width = atom_lists.shape
     m = X.shape[1]
     Xp = jnp.concatenate([X, jnp.zeros((1,) + X.shape[1:], X.dtype)])  # row q: padding
@@ -353,14 +412,14 @@ def ell_matmul(atom_lists: jax.Array, X: jax.Array) -> jax.Array:
 
     def block(i, out):  # the overlapping rows of the last block get the same values again
         s = _block_start(i, nb, n)
-        rows = jax.lax.dynamic_slice_in_dim(atom_lists, s, nb)
+        rows = _rows(atom_lists, segments, s, nb)
         return jax.lax.dynamic_update_slice_in_dim(out, jnp.sum(Xp[rows], axis=1), s, axis=0)
 
     return jax.lax.fori_loop(0, -(-n // nb), block, jnp.zeros((n, m), X.dtype))
 
 
 @partial(jax.jit, static_argnames="q")
-def _block_counts(atom_lists: jax.Array, q: int) -> jax.Array:
+def _block_counts(atom_lists: jax.Array, q: int, segments=None) -> jax.Array:
     """Entries ``< q`` of each row block (int32 per block, summed in int64 by the caller).  A
     loop over blocks: ``jnp.sum(atom_lists < q)`` may materialise the ``(n, D)`` mask (0.9 GB
     at 445K vertices)."""
@@ -371,7 +430,7 @@ def _block_counts(atom_lists: jax.Array, q: int) -> jax.Array:
 
     def block(i, counts):
         s = _block_start(i, nb, n)
-        rows = jax.lax.dynamic_slice_in_dim(atom_lists, s, nb)
+        rows = _rows(atom_lists, segments, s, nb)
         fresh = (s + jnp.arange(nb) >= i * nb)[:, None]  # not counted by the previous block
         return counts.at[i].set(jnp.sum((rows < q) & fresh, dtype=jnp.int32))
 
@@ -380,7 +439,7 @@ def _block_counts(atom_lists: jax.Array, q: int) -> jax.Array:
 
 
 @partial(jax.jit, static_argnames="q")
-def ell_rmatmul(atom_lists: jax.Array, Y: jax.Array, q: int) -> jax.Array:
+def ell_rmatmul(atom_lists: jax.Array, Y: jax.Array, q: int, segments=None) -> jax.Array:
     """``Bᵀ Y``: ``(q, m)`` from ``Y`` ``(n, m)`` (scatter-add of each vertex's row)."""
     n, width = atom_lists.shape
     m = Y.shape[1]
@@ -391,7 +450,7 @@ def ell_rmatmul(atom_lists: jax.Array, Y: jax.Array, q: int) -> jax.Array:
 
     def step(i, acc):
         s = _block_start(i, nb, n)
-        rows = jax.lax.dynamic_slice_in_dim(atom_lists, s, nb)
+        rows = _rows(atom_lists, segments, s, nb)
         y = jax.lax.dynamic_slice_in_dim(Y, s, nb)
         # rows of the last block that its predecessor already added go to the padding row
         rows = jnp.where((s + jnp.arange(nb) >= i * nb)[:, None], rows, q)
@@ -438,7 +497,7 @@ class AtomVertices(NamedTuple):
         return self.lo[a:b] + hi
 
 
-def atom_vertices(atom_lists, q: int) -> AtomVertices:
+def atom_vertices(atom_lists, q: int, segments=None) -> AtomVertices:
     """:class:`AtomVertices` of the lists: ``supp b_j`` for every atom, sorted.
 
     A counting sort in row chunks of about :data:`_HOST_CHUNK_ELEMS` entries, each within one
@@ -448,12 +507,17 @@ def atom_vertices(atom_lists, q: int) -> AtomVertices:
     bits, no float data.
     """
     lists = np.asarray(atom_lists)  # on CPU a view of the device buffer, not a copy
+    seg = None if segments is None else np.asarray(segments)
     n, width = lists.shape
+
+    def rows(s, e):
+        return decode_host(lists[s:e], None if seg is None else seg[s:e])
+
     panel = 1 << _PANEL_BITS
     n_panels = max(1, -(-n // panel))
     counts = np.zeros(q + 1, np.int64)
     for s, e in _row_chunks(0, n, width):
-        counts += np.bincount(lists[s:e].ravel(), minlength=q + 1)
+        counts += np.bincount(rows(s, e).ravel(), minlength=q + 1)
     indptr = np.zeros(q + 1, np.int64)
     np.cumsum(counts[:q], out=indptr[1:])
     lo = np.empty(int(indptr[-1]), np.uint16 if _PANEL_BITS <= 16 else np.uint32)
@@ -462,7 +526,7 @@ def atom_vertices(atom_lists, q: int) -> AtomVertices:
     for p in range(n_panels):
         starts[:, p] = nxt
         for s, e in _row_chunks(p * panel, min(n, (p + 1) * panel), width):
-            block = lists[s:e]
+            block = rows(s, e)
             valid = block < q
             ptr = np.zeros(e - s + 1, np.int64)
             np.cumsum(valid.sum(axis=1), out=ptr[1:])
@@ -491,7 +555,7 @@ def atom_sums(av: AtomVertices, vals: np.ndarray) -> np.ndarray:
     return out
 
 
-def ell_gram_rows(atom_lists, av: AtomVertices, ks, vals=None) -> np.ndarray:
+def ell_gram_rows(atom_lists, av: AtomVertices, ks, vals=None, segments=None) -> np.ndarray:
     """Rows ``G[k, :] = Σ_{v ∈ supp b_k} vals[v] · B[v, :]`` ``(len(ks), q)`` float64 (host).
 
     ``vals = None``: the overlap counts ``|supp b_k ∩ supp b_j|`` (exact), else the weighted
@@ -502,6 +566,7 @@ def ell_gram_rows(atom_lists, av: AtomVertices, ks, vals=None) -> np.ndarray:
     adds the chunks' partial sums).
     """
     lists = np.asarray(atom_lists)
+    seg = None if segments is None else np.asarray(segments)
     q = av.indptr.size - 1
     width = lists.shape[1]
     step = max(1, _HOST_CHUNK_ELEMS // max(width, 1))
@@ -511,51 +576,14 @@ def ell_gram_rows(atom_lists, av: AtomVertices, ks, vals=None) -> np.ndarray:
         for s in range(0, supp.size, step):
             verts = supp[s:s + step]
             wts = None if vals is None else np.repeat(vals[verts], width)
-            out[i] += np.bincount(lists[verts].ravel(), weights=wts, minlength=q + 1)
+            ids = decode_host(lists[verts], None if seg is None else seg[verts])
+            out[i] += np.bincount(ids.ravel(), weights=wts, minlength=q + 1)
     return out[:, :q]
 
 
-def sparse_gram(frame: SparseFrame, weights=None) -> sp.csr_matrix:
-    """``G = Bᵀ W B`` ``(q, q)`` as float64 scipy CSR (host; ``W = diag(weights)`` or ``I``).
+def __getattr__(name):  # sparse_gram lives in bsfjax._sparse_gram (imports this module)
+    if name == "sparse_gram":
+        from ._sparse_gram import sparse_gram
 
-    Unweighted entries are the exact overlap counts ``|supp b_i ∩ supp b_j|``.  Cost
-    ``Σ_v D_v²`` (``D_v`` atoms at vertex ``v``), memory ``O(nnz(G))``.
-    """
-    if not isinstance(frame, SparseFrame):
-        raise BSFError(f"frame must be a bsfjax.SparseFrame, got {type(frame).__name__}")
-    B = frame.to_scipy(weights)
-    return (B.T.tocsr() @ B).tocsr()
-
-
-class EllGramSource:
-    """Gram rows ``b_kᵀ W B`` of a :class:`SparseFrame` from its own atom lists (host view) and
-    their 16-bit transpose (:func:`atom_vertices`): about ``nnz · 2`` bytes besides the lists,
-    where a float64 scipy CSR and its transpose took ``nnz · 24``.
-
-    Without weights the rows are the exact overlap counts; with weights each term is
-    ``√w_v · √w_v`` summed in increasing ``v``, the products and order of scipy's
-    ``diag(√w) B`` CSR product.
-    """
-
-    def __init__(self, frame: SparseFrame, w64):
-        self.lists = np.asarray(frame.atom_lists)  # on CPU a view of the device buffer
-        self.av = atom_vertices(self.lists, frame.n_atoms)
-        if w64 is None:
-            self.vals = None
-        else:
-            sw = np.sqrt(w64)
-            self.vals = sw * sw
-
-    def norms2(self) -> np.ndarray:
-        """``(q,)`` float64 ``‖b_j‖²_W``."""
-        if self.vals is None:
-            return np.diff(self.av.indptr).astype(np.float64)
-        return atom_sums(self.av, self.vals)
-
-    def rows(self, ks) -> np.ndarray:
-        return ell_gram_rows(self.lists, self.av, ks, self.vals)
-
-    def release(self) -> None:
-        """Return the transpose's memory (see :mod:`bsfjax._memory`)."""
-        self.av = self.lists = None
-        release_free_memory()
+        return sparse_gram
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -33,6 +33,33 @@ def test_spectrum_command(tmp_path, sphere_mesh, capsys):
         np.testing.assert_allclose(z["evals"], bsfjax.spectrum(sphere_mesh, 8).evals)
 
 
+def test_spectrum_command_method_is_passed_through(tmp_path, sphere_mesh, monkeypatch):
+    import bsfjax._spectrum as spectrum_module
+
+    mesh_path = tmp_path / "s.ply"
+    bsfjax.save_mesh(mesh_path, sphere_mesh)
+    seen = []
+    real = spectrum_module.spectrum
+
+    def spy(mesh, k, **kw):
+        seen.append(kw.get("method", "auto"))
+        return real(mesh, k, **kw)
+
+    monkeypatch.setattr(spectrum_module, "spectrum", spy)
+    for method in ("dense", "lanczos"):
+        out = tmp_path / f"spec-{method}.npz"
+        assert main(["spectrum", str(mesh_path), "-k", "8", "--out", str(out),
+                     "--method", method]) == 0
+        with np.load(out) as z:
+            np.testing.assert_allclose(z["evals"], real(sphere_mesh, 8, method=method).evals,
+                                       rtol=1e-6, atol=1e-9)
+    assert main(["spectrum", str(mesh_path), "-k", "8", "--out", str(tmp_path / "a.npz")]) == 0
+    assert seen == ["dense", "lanczos", "auto"]
+    r = run("spectrum", str(mesh_path), "-k", "8", "--out", str(tmp_path / "x.npz"),
+            "--method", "nope")
+    assert r.returncode == 2 and "invalid choice" in r.stderr
+
+
 def test_bad_input_is_one_line_without_traceback(tmp_path):
     out = tmp_path / "never.npz"
     r = run("spectrum", str(tmp_path / "missing.off"), "--out", str(out))

@@ -398,3 +398,63 @@ def test_sparse_frames_with_the_adaptive_and_hygiene_options(pair):
     assert int(np.sum(np.asarray(a_s) != 0)) <= 6
     np.testing.assert_allclose(np.asarray(decode(sparse, a_s)), np.asarray(decode(dense, a_d)),
                                atol=2e-3)
+
+
+def test_packed_lists_beyond_16_bits(monkeypatch):
+    """q ≥ 2¹⁶: 16-bit lists with per-vertex segment starts (bsfjax._packed_lists) give the
+    int32 lists' products, counts, transpose, Gram rows, columns and pull-back; the builder
+    packs them as the atoms arrive (blocks straddling 2¹⁶ and 2·2¹⁶)."""
+    import bsfjax._sparse_frame as sf_mod
+    from bsfjax._packed_lists import decode_host, decode_traced, pack_lists
+
+    rng = np.random.default_rng(7)
+    n, q = 47, 140_000
+    active = np.unique(np.concatenate([[0, 65_535, 65_536, 131_071, 131_072, q - 1],
+                                       rng.integers(0, q, 60)]))
+    B = np.zeros((n, q), bool)
+    B[:, active] = rng.random((n, active.size)) < 0.4
+    B[5] = False  # a vertex in no atom
+    B[6, :65_536] = False  # a vertex with atoms above 2¹⁶ only
+    width = int(B.sum(axis=1).max())
+    lists = np.stack([np.concatenate([np.flatnonzero(r), np.full(width - r.sum(), q)])
+                      for r in B]).astype(np.int32)
+    lo, seg = pack_lists(lists, q, rows=10)
+    assert lo.dtype == np.uint16 and seg.shape == (n, 2)
+    np.testing.assert_array_equal(decode_host(lo, seg), lists)
+    np.testing.assert_array_equal(np.asarray(decode_traced(jnp.asarray(lo), jnp.asarray(seg))),
+                                  lists)
+    for chunks, step in ((3, 20_000), (1, 70_000), (50, 1_000)):
+        monkeypatch.setattr(sf_mod, "_BUILD_CHUNKS", chunks)
+        builder = sf_mod._ListBuilder(n, q)
+        for a in range(0, q, step):
+            r, c = np.nonzero(B[:, a:a + step])
+            builder.append(r, (c + a).astype(np.int32))
+        got_lo, got_seg = builder.finish_packed()
+        np.testing.assert_array_equal(got_lo, lo)
+        np.testing.assert_array_equal(got_seg, seg)
+    kw = dict(coeffs=jnp.zeros((4, q)), taus=jnp.ones(q), centers=jnp.zeros(q, jnp.int32),
+              mass=jnp.ones(n), gammas=jnp.full(q, 0.5))
+    packed = SparseFrame(atom_lists=jnp.asarray(lo), atom_segments=jnp.asarray(seg), **kw)
+    plain = SparseFrame(atom_lists=jnp.asarray(lists), **kw)
+    X = rng.integers(-4, 5, size=(3, q)).astype(np.float32)
+    Y = rng.integers(-4, 5, size=(3, n)).astype(np.float32)
+    np.testing.assert_array_equal(np.asarray(packed.apply(jnp.asarray(X))),
+                                  X @ B.T.astype(np.float32))
+    np.testing.assert_array_equal(np.asarray(packed.apply_transpose(jnp.asarray(Y))),
+                                  Y @ B.astype(np.float32))
+    assert packed.nnz == plain.nnz == B.sum()
+    np.testing.assert_array_equal(packed.host_lists(), lists)
+    np.testing.assert_array_equal(packed.to_scipy().toarray(), B)
+    np.testing.assert_array_equal(packed.atom_columns(active[:5]), B[:, active[:5]])
+    av, av_ref = (sf_mod.atom_vertices(f.atom_lists, q, f.atom_segments) for f in (packed, plain))
+    for x, y in zip(av, av_ref):
+        np.testing.assert_array_equal(x, y)
+    ks = active[[0, 2, 3, -1]]
+    np.testing.assert_array_equal(sf_mod.ell_gram_rows(lo, av, ks, segments=seg),
+                                  sf_mod.ell_gram_rows(lists, av_ref, ks))
+    p2p = rng.integers(0, n, n)
+    np.testing.assert_array_equal(packed.pull_back(p2p, kw["coeffs"], kw["mass"]).host_lists(),
+                                  lists[p2p])
+    cols = np.sort(rng.choice(active, 20, replace=False))
+    sel, sel_ref = (f.select_columns(cols) for f in (packed, plain))
+    np.testing.assert_array_equal(sel.host_lists(), sel_ref.host_lists())
