@@ -186,17 +186,19 @@ def kill_and_resume(source, labels_file, targets, folder: Path, reference: Path,
     argv = [sys.executable, "-m", "bsfjax.cli", "transfer", str(source), *map(str, targets),
             "--labels", str(labels_file), "--out-dir", str(out), "-k", str(k), "--no-progress"]
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=COLD)
-    while proc.poll() is None and len(list(out.glob("*.txt"))) < 2:
+    while proc.poll() is None and len(list(out.glob("[!.]*.txt"))) < 2:  # not temporaries
         time.sleep(0.05)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    done_before = sorted(p.name for p in out.glob("*.txt"))
+    done_before = sorted(p.name for p in out.glob("[!.]*.txt"))
     leftovers = [p.name for p in out.iterdir() if p.name.startswith(".")]
     r = subprocess.run(argv, capture_output=True, text=True, env=COLD)
+    leftovers_after_rerun = [p.name for p in out.iterdir() if p.name.startswith(".")]
     line = next(ln for ln in r.stderr.splitlines() if "complete (skipped)" in ln)
     same = all((out / f"{p.stem}.txt").read_bytes() == (reference / f"{p.stem}.txt").read_bytes()
                for p in targets)
-    return {"killed_after": done_before, "temporaries_left": leftovers, "rerun": line,
+    return {"killed_after": done_before, "temporaries_left": leftovers,
+            "temporaries_after_rerun": leftovers_after_rerun, "rerun": line,
             "rerun_status": r.returncode, "files_equal_uninterrupted": same}
 
 

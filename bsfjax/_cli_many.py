@@ -113,6 +113,19 @@ def _complete(stem: str, out_dir: Path, mesh_dir: Path | None) -> bool:
         mesh_dir is None or (mesh_dir / f"{stem}.ply").is_file())
 
 
+def _remove_stale_temporaries(targets, out_dir: Path, mesh_dir: Path | None) -> None:
+    """Remove what a killed run (SIGKILL: no clean-up) left of its atomic writes: the
+    ``.<name>.XXXXXXXX.tmp<suffix>`` files of this run's outputs (:func:`bsfjax._files.atomic_path`
+    names), never the outputs themselves."""
+    names = [(out_dir, "summary.json")] + [(out_dir, f"{p.stem}.txt") for p in targets]
+    if mesh_dir is not None:
+        names += [(mesh_dir, f"{p.stem}.ply") for p in targets]
+    for folder, name in names:
+        suffix = Path(name).suffix
+        for tmp in folder.glob(f".{name}.????????.tmp{suffix}"):
+            tmp.unlink(missing_ok=True)
+
+
 def cmd_transfer_many(args, error) -> int:
     """The multi-target ``bsfjax transfer`` (see the module docstring)."""
     _initialize_distributed(args, error)
@@ -134,6 +147,8 @@ def cmd_transfer_many(args, error) -> int:
     values = read_values(args, source.n_vertices)
     out_dir.mkdir(parents=True, exist_ok=True)
     multi = jax.process_count() > 1
+    if jax.process_index() == 0:  # before the first barrier: no process is writing yet
+        _remove_stale_temporaries(targets, out_dir, mesh_dir)
     if multi:  # every process lists the finished targets before any of them writes
         from jax.experimental import multihost_utils
 

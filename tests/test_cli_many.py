@@ -80,11 +80,17 @@ def test_truth_a_bad_target_and_resume(files, one_process, capsys):
     rows = {r["target"].rsplit("/", 1)[-1]: r
             for r in json.loads((out / "summary.json").read_text())["targets"]}
     assert rows["t506.ply"]["status"] == "ok" and "accuracy" in rows["t506.ply"]  # kept
-    # a missing output (a run killed before it) is computed again; --overwrite redoes all
+    # a missing output (a run killed before it) is computed again; --overwrite redoes all;
+    # what the killed run left of its atomic writes is removed, nothing else
     (out / "ply" / "t506.ply").unlink()
+    stale = [out / ".t506.txt.k4xdw8yy.tmp.txt", out / "ply" / ".t506.ply.a_b1c2d3.tmp.ply"]
+    kept = [out / ".t506.txt.notours.tmp.txt", out / "notes.tmp.txt"]
+    for f in stale + kept:
+        f.write_text("partial")
     assert main(argv[:3] + argv[4:]) == 0  # without the bad target
     assert "0 complete (skipped), 1 to run" in capsys.readouterr().err
     assert (out / "ply" / "t506.ply").is_file()
+    assert not any(f.exists() for f in stale) and all(f.read_text() == "partial" for f in kept)
     assert main(argv[:3] + argv[4:] + ["--overwrite"]) == 0
     assert "0 complete (skipped), 1 to run" in capsys.readouterr().err
     assert (out / "t506.txt").stat().st_mtime_ns > before
