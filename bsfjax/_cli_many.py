@@ -115,8 +115,8 @@ def _complete(stem: str, out_dir: Path, mesh_dir: Path | None) -> bool:
 
 def _remove_stale_temporaries(targets, out_dir: Path, mesh_dir: Path | None) -> None:
     """Remove what a killed run (SIGKILL: no clean-up) left of its atomic writes: the
-    ``.<name>.XXXXXXXX.tmp<suffix>`` files of this run's outputs (:func:`bsfjax._files.atomic_path`
-    names), never the outputs themselves."""
+    ``.<name>.<8 random characters>.tmp<suffix>`` files of this run's outputs (the names of
+    :func:`bsfjax._files.atomic_path`), never the outputs themselves."""
     names = [(out_dir, "summary.json")] + [(out_dir, f"{p.stem}.txt") for p in targets]
     if mesh_dir is not None:
         names += [(mesh_dir, f"{p.stem}.ply") for p in targets]

@@ -145,7 +145,7 @@ def _one_target(rep, it, *, cfg: _Config):
         zo_m, zo_n, w_n, chunk = phi_m[:, :km], phi_n[:, :km], mass_n, cfg.chunk
         if cfg.zoomout_chunk is not None:  # padded samples: weight 0 (no cell names them)
             idx_n = it["zo_indices"]
-            w_n = jax.ops.segment_sum(mass_n, it["zo_cells"], num_segments=idx_n.shape[0])
+            w_n = Subsample(idx_n, it["zo_cells"]).weights(mass_n)
             zo_m, zo_n, chunk = zo_m[rep["zo_indices"]], zo_n[idx_n], cfg.zoomout_chunk
         C_ref = _zoomout_jit(C0, zo_m, zo_n, w_n, sizes_n=sizes, sizes_m=sizes, chunk=chunk,
                              adjoint=False)
