@@ -52,8 +52,8 @@ ORIENT_WEIGHT = 1.0
 
 
 #: Farthest-point samples per shape on which :func:`estimate_map`'s ZoomOut runs when it has
-#: the meshes (:func:`bsfjax.subsample`): on FAUST (6890 vertices) 9× fewer search operations,
-#: the same accuracy on 9 pairs (docs/results.md, "Real segmentations").
+#: the meshes (:func:`bsfjax.subsample`): on FAUST (6890 vertices) 12× fewer search
+#: operations, the same accuracy on 9 pairs (docs/results.md, "ZoomOut on samples").
 ZOOMOUT_SAMPLES = 2000
 
 
