@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ._validate import check_finite
+from ._validate import check_finite, check_indices
 from ._errors import BSFError
 from ._spectrum import Spectrum, map_to_unit_area, unit_area_pair
 
@@ -364,14 +364,12 @@ def _check_samples(samples, n_m: int, n_n: int):
         raise BSFError("samples must be (source, target) bsfjax.Subsample s "
                        "(bsfjax.subsample(mesh, n))") from exc
     for name, (idx, cells), n in (("source", pairs[0], n_m), ("target", pairs[1], n_n)):
-        if idx.ndim != 1 or idx.size == 0 or cells.shape != (n,) \
-                or not np.issubdtype(idx.dtype, np.integer) \
-                or not np.issubdtype(cells.dtype, np.integer):
-            raise BSFError(f"{name} samples: expected (s,) indices and ({n},) cells of ints, got "
-                           f"{idx.shape} {idx.dtype} and {cells.shape} {cells.dtype}")
-        if idx.min() < 0 or idx.max() >= n or cells.min() < 0 or cells.max() >= idx.size:
-            raise BSFError(f"{name} samples: indices must lie in [0, {n}) and cells in "
-                           f"[0, {idx.size}) (was the subsample made on this mesh?)")
+        if idx.ndim != 1 or cells.shape != (n,):
+            raise BSFError(f"{name} samples: expected (s,) indices and ({n},) cells, got "
+                           f"{idx.shape} and {cells.shape} (was the subsample made on this "
+                           f"mesh?)")
+        check_indices(idx, f"{name} samples: indices", n)
+        check_indices(cells, f"{name} samples: cells", idx.size, what="positions in indices")
     return sub_m, sub_n
 
 
