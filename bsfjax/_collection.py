@@ -38,7 +38,7 @@ from ._descriptors import _wks_jit
 from ._errors import BSFError
 from ._estimation import FmapWeights, _cast, _energy, _geometry, _Geometry, _setup, _Shape, \
     _solve, _weights_array
-from ._fmap import _DEFAULT_BUDGET, _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
+from ._fmap import _default_chunk, _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
 from ._highlevel import ORIENT_WEIGHT, ZOOMOUT_SAMPLES, _check_landmarks, _regime
 from ._indicators import labels_to_indicators
 from ._mesh import Mesh, load_mesh
@@ -312,13 +312,13 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
             rep["distances"] = np.asarray(geodesic_distances(source, rep["centers"]),
                                           np.float64) / np.sqrt(a0)
-    chunk = max(8, _DEFAULT_BUDGET // n_m)
+    chunk = _default_chunk(n_m)
     zo_chunk = None
     if zoomout_samples is not None:
         check_int(zoomout_samples, "zoomout_samples", 1)
         sub_m = subsample(source, zoomout_samples)
         rep["zo_indices"] = sub_m.indices
-        zo_chunk = max(8, _DEFAULT_BUDGET // sub_m.indices.size)
+        zo_chunk = _default_chunk(sub_m.indices.size)
     lm_of = _landmark_lookup(landmarks)
     pending: dict[tuple, list[_Target]] = {}
 
