@@ -5,13 +5,15 @@ followed by :func:`bsfjax.transfer_labels` does for each pair — WKS descriptor
 WKS), the functional map of :func:`bsfjax.estimate_fmap` (orientation term without
 landmarks), ZoomOut, its point map, and the method's transfer through the one engine
 (``method.prepare`` / ``carry``) — but with the source prepared once and the targets run
-through **one jitted kernel** per group of equal shapes:
+through **three jitted stages** per group of equal shapes (the estimation problem, the map,
+the transfer):
 
 - **size buckets**: a target of ``n`` vertices (``m`` faces) is padded to the bucket size
   ``size_bucket(n)`` (``size_bucket(m)``): extra vertices have zero mass and zero eigenvector
   rows, extra faces zero area.  Every stage weighs vertices by mass or uses the target's
   vertices only as queries, so the padded target gives the unpadded results (tested); the
-  kernel compiles once per bucket, not once per vertex count.
+  stages that touch every vertex compile once per bucket, not once per vertex count, and the
+  map stage (the ``k × k`` solve and ZoomOut on the subsamples) once for all buckets.
 - **devices**: a batch of targets is split over this process's JAX devices, each running
   its slice at the same time;
 - **processes**: under ``jax.distributed`` target ``i`` belongs to the process owning global
@@ -84,14 +86,21 @@ class _Config(NamedTuple):
 
 
 @functools.lru_cache(maxsize=64)
-def _kernel_for(cfg: _Config):
-    """The jitted per-target kernel of a config (one function object per config, so that it
-    compiles once per bucket shape and device)."""
-    return jax.jit(functools.partial(_one_target, cfg=cfg))
+def _stages_for(cfg: _Config):
+    """The three jitted stages of a config (one set of function objects per config).
+
+    The map's solve and its ZoomOut on the subsamples see only ``k``-sized operators and
+    ``s_b`` samples, so ``_map_stage`` compiles once for all size buckets; only the stages
+    that touch every vertex (descriptors, final point map, the method) compile per bucket.
+    That halves the compilations' time for a collection spread over three buckets (module
+    doc; ``docs/benchmarks.md``)."""
+    return (jax.jit(functools.partial(_problem_stage, cfg=cfg)),
+            jax.jit(functools.partial(_map_stage, cfg=cfg)),
+            jax.jit(functools.partial(_transfer_stage, cfg=cfg)))
 
 
 def _dispatch(cfg: _Config, replicated: list, items: list) -> list:
-    """Run the kernel on up to ``d`` targets of one bucket, target ``i`` on local device ``i``.
+    """Run the stages on up to ``d`` targets of one bucket, target ``i`` on local device ``i``.
 
     Every call is dispatched before any result is awaited, so the devices compute their
     targets at the same time (targets are independent: no communication).  Not ``vmap`` over
@@ -100,19 +109,29 @@ def _dispatch(cfg: _Config, replicated: list, items: list) -> list:
     ``shard_map`` program either: ``shard_map`` trips lineax's structure check inside the
     estimation's solve.  ``replicated[i]``: the source arrays already on device ``i``."""
     devices = jax.local_devices()
-    return [_kernel_for(cfg)(replicated[i], jax.device_put(it, devices[i]))
-            for i, it in enumerate(items)]
+    problem, fmap, transfer = _stages_for(cfg)
+    out = []
+    for i, it in enumerate(items):
+        it = jax.device_put(it, devices[i])
+        pb, zo = problem(replicated[i], it)
+        out.append(transfer(replicated[i], it, pb, fmap(pb, zo)))
+    return out
 
 
-def _one_target(rep, it, *, cfg: _Config):
-    """Map estimation and transfer for one (padded) target ``it``; ``rep``: the source."""
+def _spectra(rep, it):
+    """The pair's spectra: the source at the pair's common unit-area factor ``it["ratio"]`` (a
+    power of 4 times its own, exact in floating point, as :func:`bsfjax.unit_area_pair`)."""
+    r = it["ratio"]
+    return (Spectrum(rep["evals"] * r, rep["evecs"] * jnp.sqrt(r), rep["mass"] / r),
+            Spectrum(it["evals"], it["evecs"], it["mass"]))
+
+
+def _problem_stage(rep, it, *, cfg: _Config):
+    """Per bucket: the descriptors' estimation problem (``k``-sized operators) and ZoomOut's
+    inputs (the eigenvector rows of the subsamples and their cell weights)."""
     dt = jnp.result_type(float)
     k, km = cfg.k, cfg.k_map
-    # the pair's common unit-area factor: the source arrives at its own one, times a power of
-    # 4 per target (exact in floating point, as bsfjax.unit_area_pair)
-    r = it["ratio"]
-    src = Spectrum(rep["evals"] * r, rep["evecs"] * jnp.sqrt(r), rep["mass"] / r)
-    tgt = Spectrum(it["evals"], it["evecs"], it["mass"])
+    src, tgt = _spectra(rep, it)
 
     def descriptors(s: Spectrum, lm):
         def w(landmarks):
@@ -135,24 +154,42 @@ def _one_target(rep, it, *, cfg: _Config):
     pb = _setup(sm, sn, jnp.asarray(_weights_array(weights), dt), lap_kind="resolvent",
                 gamma=jnp.asarray(0.5, dt), normalize_descriptors=True, normalize_weights=True,
                 orient_sign=1.0)
+    zo_m, zo_n = src.evecs[:, :km].astype(dt), tgt.evecs[:, :km].astype(dt)
+    w_n = tgt.mass.astype(dt)
+    if cfg.zoomout_chunk is not None:  # padded samples: weight 0 (no cell names them)
+        idx_n = it["zo_indices"]
+        w_n = Subsample(idx_n, it["zo_cells"]).weights(w_n)
+        zo_m, zo_n = zo_m[rep["zo_indices"]], zo_n[idx_n]
+    return pb, (zo_m, zo_n, w_n)
+
+
+def _map_stage(pb, zo, *, cfg: _Config):
+    """The functional map: the estimate ``C₀`` (``k × k``), then ZoomOut ``k → k_map`` in steps
+    of one on the subsamples, as :func:`bsfjax.estimate_map`.  Free of the vertex count when
+    ZoomOut runs on subsamples."""
+    dt = jnp.result_type(float)
     rtol, atol = (1e-10, 1e-12) if dt == jnp.float64 else (1e-4, 1e-6)
     C0 = _solve(pb, rtol=rtol, atol=atol, max_steps=8)
+    k, km = cfg.k, cfg.k_map
+    if km <= k:
+        return C0
+    zo_m, zo_n, w_n = zo
+    sizes = _size_schedule(k, km, 1, km - k)
+    chunk = cfg.chunk if cfg.zoomout_chunk is None else cfg.zoomout_chunk
+    return _zoomout_jit(C0, zo_m, zo_n, w_n, sizes_n=sizes, sizes_m=sizes, chunk=chunk,
+                        adjoint=False)
+
+
+def _transfer_stage(rep, it, pb, C_ref, *, cfg: _Config):
+    """Per bucket: the point map of ``C_ref`` over every vertex, its ``k × k`` map and energy,
+    and the method's transfer through the one engine's ``prepare`` / ``carry``."""
+    dt = jnp.result_type(float)
+    k, km = cfg.k, cfg.k_map
+    src, tgt = _spectra(rep, it)
     phi_m, phi_n = src.evecs.astype(dt), tgt.evecs.astype(dt)
-    mass_n = tgt.mass.astype(dt)
-    C_ref = C0
-    if km > k:  # ZoomOut k → k_map in steps of one, as bsfjax.estimate_map
-        sizes = _size_schedule(k, km, 1, km - k)
-        zo_m, zo_n, w_n, chunk = phi_m[:, :km], phi_n[:, :km], mass_n, cfg.chunk
-        if cfg.zoomout_chunk is not None:  # padded samples: weight 0 (no cell names them)
-            idx_n = it["zo_indices"]
-            w_n = Subsample(idx_n, it["zo_cells"]).weights(mass_n)
-            zo_m, zo_n, chunk = zo_m[rep["zo_indices"]], zo_n[idx_n], cfg.zoomout_chunk
-        C_ref = _zoomout_jit(C0, zo_m, zo_n, w_n, sizes_n=sizes, sizes_m=sizes, chunk=chunk,
-                             adjoint=False)
     p2p = _to_p2p(C_ref, phi_m[:, :km], phi_n[:, :km], cfg.chunk, False)
-    C = _from_p2p(p2p, phi_m[:, :k], phi_n[:, :k], mass_n)
+    C = _from_p2p(p2p, phi_m[:, :k], phi_n[:, :k], tgt.mass.astype(dt))
     energy = _energy(C, pb)
-    # the method, through the one engine's prepare / carry (as bsfjax.transfer)
     method = cfg.method
     full = getattr(method, "full_spectra", False)
     two_k = isinstance(method, SpectralProjection) and method.factor == 2
