@@ -13,7 +13,10 @@ the transfer):
   rows, extra faces zero area.  Every stage weighs vertices by mass or uses the target's
   vertices only as queries, so the padded target gives the unpadded results (tested); the
   stages that touch every vertex compile once per bucket, not once per vertex count, and the
-  map stage (the ``k × k`` solve and ZoomOut on the subsamples) once for all buckets.
+  map stage (the ``k × k`` solve and ZoomOut on the subsamples) once for all buckets.  In a
+  small collection a bucket with few targets joins a larger one when that costs less padding
+  than a compilation (:func:`~bsfjax._buckets.merge_buckets`): six 3.4K–6.9K-vertex targets
+  compile once, not three times.
 - **devices**: a batch of targets is split over this process's JAX devices, each running
   its slice at the same time;
 - **processes**: under ``jax.distributed`` target ``i`` belongs to the process owning global
@@ -35,7 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._buckets import BUCKET_FACTORS, size_bucket
+from ._buckets import BUCKET_FACTORS, merge_buckets, size_bucket
 from ._descriptors import _wks_jit
 from ._errors import BSFError
 from ._estimation import FmapWeights, _cast, _energy, _geometry, _Geometry, _setup, _Shape, \
@@ -52,6 +55,10 @@ from ._spectrum import Spectrum, spectrum, unit_area, unit_area_pair
 from ._validate import check_int, compact_labels
 
 __all__ = ["transfer_collection", "TargetTransfer", "size_bucket", "BUCKET_FACTORS"]
+
+#: Collections of at most this many targets are read once ahead for their sizes,
+#: so that buckets with few targets merge into larger ones (:func:`merge_buckets`).
+_SCAN_LIMIT = 64
 
 class TargetTransfer(NamedTuple):
     """The result for one target of :func:`transfer_collection`."""
@@ -231,10 +238,39 @@ def _geometry_arrays(mesh: Mesh, m_b: int) -> dict:
             "third_area": _pad_rows(g.third_area, m_b)}
 
 
-def _bucket_key(t: _Target, pad: bool, orient: bool, n_samples: int | None):
+def _merged_sizes(targets: list, indices: list[int], lm_of) -> dict[int, tuple[int, int]]:
+    """The padded (vertex, face) counts of each target of a small collection after
+    :func:`merge_buckets` (within each landmark count): its targets are read once ahead for
+    their sizes.  Empty for more than :data:`_SCAN_LIMIT` targets (each bucket then holds
+    enough of them to be worth its compilation).  A target that cannot be read is skipped
+    here; the run reports it."""
+    if len(indices) > _SCAN_LIMIT:
+        return {}
+    seen = {}
+    for i in indices:
+        try:
+            mesh = _as_mesh(targets[i])
+        except (BSFError, ValueError, OSError):
+            continue
+        lm = lm_of(i)
+        seen[i] = (0 if lm is None else len(lm[0]), size_bucket(mesh.n_vertices),
+                   size_bucket(mesh.n_faces))
+    out = {}
+    for p in {v[0] for v in seen.values()}:
+        group = {i: v for i, v in seen.items() if v[0] == p}
+        into = merge_buckets([v[1] for v in group.values()])
+        faces: dict[int, int] = {}
+        for _, n_b, m_b in group.values():
+            faces[into[n_b]] = max(faces.get(into[n_b], 0), m_b)
+        out.update({i: (into[n_b], faces[into[n_b]]) for i, (_, n_b, _) in group.items()})
+    return out
+
+
+def _bucket_key(t: _Target, pad: bool, orient: bool, n_samples: int | None,
+                merged: dict[int, tuple[int, int]]):
     n, m = t.mesh.n_vertices, t.mesh.n_faces
-    n_b = size_bucket(n) if pad else n
-    m_b = (size_bucket(m) if pad else m) if orient else 0
+    n_b, m_b = merged.get(t.index, (size_bucket(n), size_bucket(m))) if pad else (n, m)
+    m_b = m_b if orient else 0
     s_b = 0 if n_samples is None else min(n_samples, n_b)
     return n_b, m_b, 0 if t.landmarks is None else len(t.landmarks[0]), s_b
 
@@ -296,8 +332,9 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     - ``threshold``: as :func:`bsfjax.transfer_labels`.
     - ``zoomout_samples``: as :func:`bsfjax.estimate_map` (ZoomOut on this many
       farthest-point samples per shape; ``None``: every vertex).
-    - ``pad``: pad vertex and face counts to :func:`size_bucket` sizes (``False``: one
-      compilation per distinct count).
+    - ``pad``: pad vertex and face counts to :func:`size_bucket` sizes, merged for a
+      collection of at most 64 targets (module doc; ``False``: one compilation per distinct
+      count).
     - ``spectrum_cache``: folder for the spectra (see :func:`bsfjax.spectrum`).
     - ``errors``: ``"raise"``, or ``"report"``: a target that cannot be read or solved yields
       its exception and the others go on.
@@ -412,6 +449,9 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 seconds=tg.seconds + share)
 
     targets = list(targets)
+    # every process scans the whole collection: a target's padding (and so its result, to
+    # the last bit of a float reduction) must not depend on how the processes share it
+    merged = _merged_sizes(targets, list(range(len(targets))), lm_of) if pad else {}
     in_flight = None  # the group dispatched last, collected after the next one is prepared
     # on accelerators the next target's eigensolve (host) overlaps the dispatched kernel; on a
     # CPU backend both would share the same cores (measured slower), so they alternate
@@ -424,7 +464,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 raise
             yield i, exc
             continue
-        key = _bucket_key(tg, pad, tg.landmarks is None, zoomout_samples)
+        key = _bucket_key(tg, pad, tg.landmarks is None, zoomout_samples, merged)
         pending.setdefault(key, []).append(tg)
         if len(pending[key]) == len(devices):  # one target per device
             launched = launch(key, pending.pop(key))

@@ -23,6 +23,39 @@ def test_size_bucket_is_a_small_bounded_set():
     assert len({size_bucket(n) for n in range(3400, 6900)}) <= 3
 
 
+def test_merge_buckets_trades_padding_for_compilations():
+    from bsfjax._buckets import MERGE_PADDING, merge_buckets
+
+    six = [size_bucket(n) for n in (6890, 6201, 5512, 4823, 4134, 3446)]
+    assert set(merge_buckets(six).values()) == {8192}  # the issue's six targets: one size
+    many = [4096] * 30 + [8192] * 50  # 30 · 4096 padded vertices > MERGE_PADDING: kept apart
+    assert merge_buckets(many) == {4096: 4096, 8192: 8192}
+    # exactly at the bound merges, one vertex over does not
+    assert merge_buckets([100, 100, 100 + MERGE_PADDING // 2]) == {100: 100 + MERGE_PADDING // 2,
+                                                                   100 + MERGE_PADDING // 2:
+                                                                   100 + MERGE_PADDING // 2}
+    assert merge_buckets([100, 100, 101 + MERGE_PADDING // 2])[100] == 100
+    # a chain: what moved up moves on with its new bucket, never down
+    into = merge_buckets([512, 1024, 1024, 3072])
+    assert into == {512: 3072, 1024: 3072, 3072: 3072}
+
+
+def test_merged_buckets_give_the_unpadded_results():
+    """Two targets in two buckets (512, 2048) of a small collection are computed in one
+    (2048 vertices, the larger face bucket): the same point maps and labels as unpadded."""
+    from bsfjax._collection import _merged_sizes
+
+    small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
+    targets = [small.target, large.target]
+    sizes = _merged_sizes(targets, [0, 1], lambda i: None)
+    assert sizes[0] == sizes[1] == (2048, size_bucket(large.target.n_faces))
+    runs = [dict(transfer_collection(small.source, small.labels, targets, method="p2p", k=10,
+                                     zoomout_samples=300, pad=pad)) for pad in (True, False)]
+    for i in range(2):
+        np.testing.assert_array_equal(runs[0][i].p2p, runs[1][i].p2p)
+        np.testing.assert_array_equal(runs[0][i].labels, runs[1][i].labels)
+
+
 @pytest.fixture(scope="module")
 def collection():
     """Source: the example source (506 V); targets: the example target at two resolutions
