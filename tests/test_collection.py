@@ -47,7 +47,7 @@ def test_merged_buckets_give_the_unpadded_results():
 
     small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
     targets = [small.target, large.target]
-    sizes = _merged_sizes(targets, [0, 1], lambda i: None)
+    sizes = _merged_sizes(targets, lambda i: None)
     assert sizes[0] == sizes[1] == (2048, size_bucket(large.target.n_faces))
     runs = [dict(transfer_collection(small.source, small.labels, targets, method="p2p", k=10,
                                      zoomout_samples=300, pad=pad)) for pad in (True, False)]
