@@ -239,12 +239,12 @@ def _geometry_arrays(mesh: Mesh, m_b: int) -> dict:
             "third_area": _pad_rows(g.third_area, m_b)}
 
 
-def _merged_sizes(targets: list, lm_of) -> dict[int, tuple[int, int]]:
+def _merged_sizes(targets: list, lm_of, n_source: int) -> dict[int, tuple[int, int]]:
     """The padded (vertex, face) counts of each target of a small collection after
     :func:`merge_buckets` (within each landmark count): its targets are read once ahead for
     their sizes.  Empty for more than :data:`_SCAN_LIMIT` targets (each bucket then holds
-    enough of them to be worth its compilation).  A target that cannot be read is skipped
-    here; the run reports it.  Every process scans the whole collection: a target's padding
+    enough of them to be worth its compilation).  A target that cannot be read, or whose
+    landmarks are invalid, is skipped here; the run reports it.  Every process scans the whole collection: a target's padding
     (and so its result, to the last bit of a float reduction) must not depend on how the
     processes share it."""
     if len(targets) > _SCAN_LIMIT:
@@ -253,9 +253,9 @@ def _merged_sizes(targets: list, lm_of) -> dict[int, tuple[int, int]]:
     for i in range(len(targets)):
         try:
             mesh = _as_mesh(targets[i])
+            lm = _check_landmarks(lm_of(i), n_source, mesh.n_vertices)
         except (BSFError, ValueError, OSError):
             continue
-        lm = lm_of(i)
         seen[i] = (0 if lm is None else len(lm[0]), size_bucket(mesh.n_vertices),
                    size_bucket(mesh.n_faces))
     out = {}
@@ -452,7 +452,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 seconds=tg.seconds + share)
 
     targets = list(targets)
-    merged = _merged_sizes(targets, lm_of) if pad else {}
+    merged = _merged_sizes(targets, lm_of, n_m) if pad else {}
     in_flight = None  # the group dispatched last, collected after the next one is prepared
     # on accelerators the next target's eigensolve (host) overlaps the dispatched kernel; on a
     # CPU backend both would share the same cores (measured slower), so they alternate

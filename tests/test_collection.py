@@ -47,7 +47,7 @@ def test_merged_buckets_give_the_unpadded_results():
 
     small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
     targets = [small.target, large.target]
-    sizes = _merged_sizes(targets, lambda i: None)
+    sizes = _merged_sizes(targets, lambda i: None, small.source.n_vertices)
     assert sizes[0] == sizes[1] == (2048, size_bucket(large.target.n_faces))
     runs = [dict(transfer_collection(small.source, small.labels, targets, method="p2p", k=10,
                                      zoomout_samples=300, pad=pad)) for pad in (True, False)]
@@ -110,6 +110,13 @@ def test_errors_are_reported_per_target_or_raised(tmp_path):
     assert "bad.off" in str(out[0][1])
     with pytest.raises(ValueError, match="bad.off"):
         list(transfer_collection(small.source, small.labels, [bad], method="p2p", k=10))
+    # invalid landmarks for one target: reported for it (not a crash of the size scan), the
+    # other target finishes
+    out = dict(transfer_collection(small.source, small.labels, [small.target, small.target],
+                                   method="p2p", k=10, landmarks=[(5,), None],
+                                   errors="report"))
+    assert isinstance(out[0], (BSFError, ValueError))
+    assert out[1].labels.shape == (small.target.n_vertices,)
 
 
 @pytest.mark.parametrize("kwargs, match", [
