@@ -13,17 +13,21 @@ to a whole block of ``b`` right-hand sides at a time.  Against ARPACK's single-v
 * the orthogonalization of each new block against the basis ``Q`` (``n × m``) is a few matrix
   products instead of ``b`` matrix–vector passes over ``Q``: the basis is read from memory
   about ``b`` times less often (ARPACK's passes are half its time at ``n = 10⁵``);
-* with a supernodal Cholesky factor (CHOLMOD, the optional ``cholespy`` package) a block of
-  right-hand sides is solved faster per vector than one at a time (111K-vertex cat, this
-  2-core machine: 10 ms per vector in blocks of 12, 25 ms alone; scipy's SuperLU 53 ms, no
-  gain from blocks).
+* with a Cholesky factor (CHOLMOD, the optional ``cholespy`` package: a simplicial factor
+  with a nested-dissection ordering) a block of right-hand sides is solved faster per vector
+  than one at a time, since each sweep of the factor serves four of them (111K-vertex cat,
+  this 2-core machine: 6.5–8 ms per vector in blocks of 4–12, 19–25 ms alone; scipy's
+  SuperLU 53 ms, no gain from blocks).  MKL's PARDISO (``pypardiso``, supernodal, two
+  threads) was measured and not taken: 8 ms per vector in blocks of 12, a 0.8 s factor
+  against CHOLMOD's 1.1 s, for a dependency of several hundred MB.
 
 The price: a block Krylov space needs more solves than ARPACK's single-vector one (about 500
-against 300 for k = 100), so the measured gain is 1.8–2.0× at 10⁵–4·10⁵ vertices (``docs/
-benchmarks.md``), and the orthogonalization, bound by memory bandwidth, is still ~40 % of
-the time.  Tried and dropped: a float32 copy of ``Q`` for the reorthogonalization (``T``
-amplifies its errors; no convergence), larger blocks (more solves, no cheaper per vector past
-~16), shifts closer to the spectrum (no change).
+against 300 for k = 100), so the measured gain is 1.8–2.3× at 10⁵–4·10⁵ vertices (``docs/
+benchmarks.md``), and the orthogonalization, bound by memory bandwidth, is still ~35 % of
+the time (the basis is stored column-major, so a block is one contiguous slice).  Tried and
+dropped: a float32 copy of ``Q`` for the reorthogonalization (``T`` amplifies its errors; no
+convergence), larger blocks (more solves, no cheaper per vector past ~16), shifts closer to
+the spectrum (no change), CHOLMOD calls of four columns each (level in the loop).
 
 Projected matrix and restart.  Every time ``T`` is applied to a block ``X`` of the basis, the
 Gram–Schmidt coefficients ``C = Qᵀ T X`` and the triangular factor ``R`` of the remainder
@@ -53,6 +57,7 @@ import time
 
 import numpy as np
 import scipy.linalg
+import scipy.linalg.blas
 import scipy.sparse as sp
 import scipy.sparse.linalg
 
@@ -72,15 +77,16 @@ class MissedEigenvalue(BSFError):
     """The converged pairs are not the smallest ones: a probe found a direction below λ_k."""
 
 
-def _missed_eigenvalues(T, W, d, Y, lam, b, rng, steps: int = 2) -> int:
+def _missed_eigenvalues(T, W, d, Y, KY, lam, b, rng, steps: int = 2) -> int:
     """How many eigenvalues below ``λ_k`` the converged Ritz pairs ``(lam, Y)`` skipped.
 
     A Krylov method can converge to ``k`` true eigenpairs that are not the ``k`` smallest: a
     multiplicity above the block size is only found through rounding.  Probe: ``b`` random
     directions, deflated against ``Y`` and sharpened by ``steps`` applications of ``T``, then
-    Rayleigh–Ritz on ``[Y, probe]``.  By min–max, a Ritz value of that space below
-    ``λ_k (1 − 10⁻⁴)`` beyond those of ``Y`` proves an eigenvalue was missed (the margin covers
-    the ``"fast"`` tolerance); none found is evidence, not proof (as for ARPACK).
+    Rayleigh–Ritz on ``[Y, probe]`` (``KY = K Y`` is given: the caller's residual check has
+    it).  By min–max, a Ritz value of that space below ``λ_k (1 − 10⁻⁴)`` beyond those of
+    ``Y`` proves an eigenvalue was missed (the margin covers the ``"fast"`` tolerance); none
+    found is evidence, not proof (as for ARPACK).
     """
     P = rng.standard_normal((Y.shape[0], b))
     for _ in range(steps):
@@ -89,21 +95,29 @@ def _missed_eigenvalues(T, W, d, Y, lam, b, rng, steps: int = 2) -> int:
     P -= Y @ (Y.T @ P)
     P -= Y @ (Y.T @ P)
     P = np.linalg.qr(P)[0]
-    V = np.hstack([Y, P])
-    KV = (W @ (V / d[:, None])) / d[:, None]
-    mu = scipy.linalg.eigh(V.T @ KV, V.T @ V, eigvals_only=True)
+    KP = (W @ (P / d[:, None])) / d[:, None]
+    # [Y, P] is orthonormal (Y: Ritz vectors of an orthonormal basis; P ⟂ Y twice), so the
+    # projected pencil is standard; its blocks from the products already at hand
+    YKP = Y.T @ KP
+    H = np.block([[Y.T @ KY, YKP], [YKP.T, P.T @ KP]])
+    mu = scipy.linalg.eigh(0.5 * (H + H.T), eigvals_only=True)
     cut = lam[-1] * (1 - 1e-4)
     return max(0, int(np.sum(mu < cut)) - int(np.sum(lam < cut)))
 
 
 def default_block(k: int) -> int:
-    """Default block size ``b`` for ``k`` eigenpairs: ``clip(k // 8, 4, 16)``.
+    """Default block size ``b`` for ``k`` eigenpairs: the multiple of 4 nearest ``k / 12``,
+    between 4 and 16 (8 for k = 100).
 
     Small blocks make the Krylov space of a given size reach higher polynomial degree (fewer
-    solves in all: 540 for k = 100 at b = 12 against 792 at b = 24 on the 111K-vertex cat),
-    large ones amortize the factor's memory traffic over more right-hand sides; 12 for k = 100.
+    solves in all, k = 100 on the 111K-vertex cat: 332 at b = 4, 408 at b = 8, 492 at b = 12,
+    792 at b = 24), large ones need fewer block steps, each of which reads the whole basis
+    twice for its reorthogonalization (b = 4: 7.6 s of orthogonalization against 5.3 s at
+    b = 8).  Multiples of 4, because cholespy's CHOLMOD factor is simplicial and its solve
+    sweeps the factor once per four right-hand sides (6 cost as much as 8).  Measured in one
+    run: b = 8 15.3 s against 16.9 s at b = 12 (111K), 69.1 s against 70.3 s (445K).
     """
-    return int(np.clip(k // 8, 4, 16))
+    return int(4 * np.clip(round(k / 48), 1, 4))
 
 
 def has_cholmod() -> bool:
@@ -168,7 +182,9 @@ def _cholqr(Z: np.ndarray):
             L = np.linalg.cholesky(Qn.T @ Qn)
         except np.linalg.LinAlgError:
             return Z, np.full((Z.shape[1], Z.shape[1]), np.nan)
-        Qn = scipy.linalg.solve_triangular(L, Qn.T, lower=True).T
+        # Qn ← Qn L⁻ᵀ in place on the column-major block (BLAS trsm, side = right)
+        Qn = scipy.linalg.blas.dtrsm(1.0, L, np.asfortranarray(Qn), side=1, lower=1,
+                                     trans_a=1, overwrite_b=Qn is not Z)
         R = L.T @ R
     return Qn, R
 
@@ -267,7 +283,7 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
     def T(X):
         return d[:, None] * solve(d[:, None] * X).reshape(X.shape)
 
-    Q = np.empty((n, m + b))
+    Q = np.empty((n, m + b), order="F")  # columns contiguous: blocks are written and read
     H = np.zeros((m + b, m + b))
 
     def put(j, X):
@@ -330,10 +346,11 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
             if np.all(est <= tol):  # confirm with the true residuals
                 Y = Q[:, :n_exp] @ S[:, :k]
                 Phi = Y / d[:, None]
-                res = np.linalg.norm((W @ Phi) / d[:, None] - lam[:k] * Y, axis=0) / scale_k
+                KY = (W @ Phi) / d[:, None]
+                res = np.linalg.norm(KY - lam[:k] * Y, axis=0) / scale_k
                 if np.all(res <= max(tol, ACCEPT)):
                     timing["rayleigh_ritz"] += time.perf_counter() - t0
-                    missed = _missed_eigenvalues(T, W, d, Y, lam[:k], b, rng)
+                    missed = _missed_eigenvalues(T, W, d, Y, KY, lam[:k], b, rng)
                     if missed:
                         raise MissedEigenvalue(
                             f"block Lanczos missed {missed} eigenvalue(s) below λ_k = "

@@ -153,8 +153,8 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
               exact: every pair reaches ``‖Kψ − λψ‖ ≤ 10⁻⁸ λ_k`` by the Krylov estimate and
               ``≤ 10⁻⁶ λ_k`` recomputed (``K = A^-½ W A^-½``, ``ψ = A^½ φ``); on the TOSCA cat
               (111K / 445K vertices, k = 100) eigenvalues agree with ARPACK's to 3e-13 / 8e-13
-              relative and the eigenspaces to a principal-angle sine of 8e-7, at 1.85–2.0× /
-              1.8× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without CHOLMOD it uses
+              relative and the eigenspaces to a principal-angle sine of 8e-7, at 1.9–2.0× /
+              2.0–2.3× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without CHOLMOD it uses
               scipy's SuperLU, which solves one column at a time: slower than ``"lanczos"``.
               Shapes with exact eigenvalue multiplicities above the block size (spheres,
               symmetric toy meshes) may make it miss or not converge; ``spectrum`` then warns
