@@ -244,15 +244,15 @@ def _merged_sizes(targets: list, lm_of, n_source: int) -> dict[int, tuple[int, i
     :func:`merge_buckets` (within each landmark count): its targets are read once ahead for
     their sizes.  Empty for more than :data:`_SCAN_LIMIT` targets (each bucket then holds
     enough of them to be worth its compilation).  A target that cannot be read, or whose
-    landmarks are invalid, is skipped here; the run reports it.  Every process scans the whole collection: a target's padding
-    (and so its result, to the last bit of a float reduction) must not depend on how the
-    processes share it."""
+    landmarks are invalid, is skipped here; the run reports it.  Every process scans the
+    whole collection: a target's padding (and so its result, to the last bit of a float
+    reduction) must not depend on how the processes share it."""
     if len(targets) > _SCAN_LIMIT:
         return {}
     seen = {}
-    for i in range(len(targets)):
+    for i, target in enumerate(targets):
         try:
-            mesh = _as_mesh(targets[i])
+            mesh = _as_mesh(target)
             lm = _check_landmarks(lm_of(i), n_source, mesh.n_vertices)
         except (BSFError, ValueError, OSError):
             continue

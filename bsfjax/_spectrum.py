@@ -154,8 +154,9 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
               ``≤ 10⁻⁶ λ_k`` recomputed (``K = A^-½ W A^-½``, ``ψ = A^½ φ``); on the TOSCA cat
               (111K / 445K vertices, k = 100) eigenvalues agree with ARPACK's to 3e-13 / 8e-13
               relative and the eigenspaces to a principal-angle sine of 8e-7, at 1.9–2.0× /
-              2.0–2.3× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without CHOLMOD it uses
-              scipy's SuperLU, which solves one column at a time: slower than ``"lanczos"``.
+              2.0–2.3× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without
+              CHOLMOD it uses scipy's SuperLU, which solves one column at a time: slower than
+              ``"lanczos"``.
               Shapes with exact eigenvalue multiplicities above the block size (spheres,
               symmetric toy meshes) may make it miss or not converge; ``spectrum`` then warns
               and falls back to ``"lanczos"`` (a probe checks for missed eigenvalues).
