@@ -21,13 +21,22 @@ to a whole block of ``b`` right-hand sides at a time.  Against ARPACK's single-v
   threads) was measured and not taken: 8 ms per vector in blocks of 12, a 0.8 s factor
   against CHOLMOD's 1.1 s, for a dependency of several hundred MB.
 
-The price: a block Krylov space needs more solves than ARPACK's single-vector one (about 500
-against 300 for k = 100), so the measured gain is 1.8–2.3× at 10⁵–4·10⁵ vertices (``docs/
-benchmarks.md``), and the orthogonalization, bound by memory bandwidth, is still ~35 % of
-the time (the basis is stored column-major, so a block is one contiguous slice).  Tried and
-dropped: a float32 copy of ``Q`` for the reorthogonalization (``T`` amplifies its errors; no
+The price: a block Krylov space needs more solves than ARPACK's single-vector one (332
+against ~300 for k = 100 at b = 4), and the orthogonalization, bound by memory bandwidth, is
+a third of the time.  What makes that pass cheap (stop 25): the basis is column-major (a block
+is one contiguous slice), each Gram–Schmidt update is one ``gemm`` accumulating in place, the
+norms come from the block's Gram matrix, and the update against the older columns, whose
+share is rounding-sized, is applied only when it exceeds :data:`ORTH_LEVEL` (one read of the
+basis instead of two for a third of the blocks).  With that pass cheaper, the small block
+(b = 4 for k = 100) and a basis with room for the whole Krylov space (no restart) win:
+2.6–3.0× ARPACK at 111K vertices and 2.4–3.5× at 445K over three runs
+(``docs/benchmarks.md``).  Tried and dropped: a
+float32 copy of ``Q`` for the reorthogonalization (``T`` amplifies its errors; no
 convergence), larger blocks (more solves, no cheaper per vector past ~16), shifts closer to
-the spectrum (no change), CHOLMOD calls of four columns each (level in the loop).
+the spectrum (no change), CHOLMOD calls of four columns each (level in the loop), a
+supernodal factor (cvxopt's CHOLMOD: a 2 s factor at 445K against 6–8 s, but its solve runs
+one column at a time, 3–4× slower per vector) with a hand-written triangular solve on it
+(numba; slower than CHOLMOD's simplicial solve).
 
 Projected matrix and restart.  Every time ``T`` is applied to a block ``X`` of the basis, the
 Gram–Schmidt coefficients ``C = Qᵀ T X`` and the triangular factor ``R`` of the remainder
@@ -58,6 +67,7 @@ import time
 import numpy as np
 import scipy.linalg
 import scipy.linalg.blas
+import scipy.linalg.lapack
 import scipy.sparse as sp
 import scipy.sparse.linalg
 
@@ -71,6 +81,14 @@ __all__ = ["MissedEigenvalue", "block_lanczos", "default_block", "factorize", "h
 #: Ritz vectors has a rounding floor of ~1e-9 (errors of the solves, amplified by the spread of
 #: ``θ``), so a ``tol`` under that floor would otherwise never be confirmed.
 ACCEPT = 1e-6
+
+#: The orthogonality kept between a new block and the older basis columns, relative to the
+#: block's norm.  It is measured for every block (one read of the basis) and restored by a
+#: full Gram–Schmidt update (a second read) only when exceeded; between that and eps the
+#: Lanczos recurrence is unaffected (semi-orthogonality needs ≤ √eps ≈ 1.5e-8).  Measured,
+#: k = 100: a third of the blocks skip the update, the same number of solves, eigenvalues
+#: equal to 4e-15 and A-orthonormality 5e-13 (111K vertices); 1e-8 stalled the convergence.
+ORTH_LEVEL = 1e-12
 
 
 class MissedEigenvalue(BSFError):
@@ -106,18 +124,20 @@ def _missed_eigenvalues(T, W, d, Y, KY, lam, b, rng, steps: int = 2) -> int:
 
 
 def default_block(k: int) -> int:
-    """Default block size ``b`` for ``k`` eigenpairs: the multiple of 4 nearest ``k / 12``,
-    between 4 and 16 (8 for k = 100).
+    """Default block size ``b`` for ``k`` eigenpairs: the multiple of 4 nearest ``k / 24``,
+    between 4 and 16 (4 for k ≤ 143, 8 for k = 200).
 
     Small blocks make the Krylov space of a given size reach higher polynomial degree (fewer
-    solves in all, k = 100 on the 111K-vertex cat: 332 at b = 4, 408 at b = 8, 492 at b = 12,
-    792 at b = 24), large ones need fewer block steps, each of which reads the whole basis
-    twice for its reorthogonalization (b = 4: 7.6 s of orthogonalization against 5.3 s at
-    b = 8).  Multiples of 4, because cholespy's CHOLMOD factor is simplicial and its solve
-    sweeps the factor once per four right-hand sides (6 cost as much as 8).  Measured in one
-    run: b = 8 15.3 s against 16.9 s at b = 12 (111K), 69.1 s against 70.3 s (445K).
+    solves in all; the space needed for k = 100 on the 111K-vertex cat: 332 vectors at
+    b = 4, 408 at b = 8, 492 at b = 12), large ones need fewer block steps, each of which
+    reads the basis for its reorthogonalization.  Since that pass reads the older columns
+    once (twice only when their share exceeds :data:`ORTH_LEVEL`), small blocks win on large
+    meshes, where a solve costs most: k = 100 at 445K vertices, 29.3 s at b = 4 against 41.4 s
+    at b = 8 (at 111K level: 6.9 s against 7.2 s); k = 200 at 111K, 13.3 s at b = 8 against
+    14.7 s at b = 4.  Multiples of 4, because cholespy's CHOLMOD factor is simplicial and its
+    solve sweeps the factor once per four right-hand sides (6 cost as much as 8).
     """
-    return int(4 * np.clip(round(k / 48), 1, 4))
+    return int(4 * np.clip(round(k / 96), 1, 4))
 
 
 def has_cholmod() -> bool:
@@ -172,52 +192,72 @@ def factorize(M: sp.spmatrix, backend: str = "auto"):
     return lu.solve
 
 
-def _cholqr(Z: np.ndarray):
+def _cholqr(Z: np.ndarray, G: np.ndarray | None = None):
     """Cholesky QR, twice (``Z = Qn R``): two Gram products instead of Householder's column
-    sweeps; ``R`` has a NaN diagonal when ``Z`` is numerically rank deficient."""
+    sweeps; ``R`` has a NaN diagonal when ``Z`` is numerically rank deficient.  ``G``: ``ZᵀZ``
+    when the caller has it (saves the first Gram product); ``Z`` itself is left intact."""
     R = np.eye(Z.shape[1])
-    Qn = Z
-    for _ in range(2):
-        try:
-            L = np.linalg.cholesky(Qn.T @ Qn)
-        except np.linalg.LinAlgError:
+    Qn = np.asfortranarray(Z)
+    for it in range(2):
+        if G is None or it:
+            G = Qn.T @ Qn
+        L, info = scipy.linalg.lapack.dpotrf(G, lower=1, clean=1)
+        if info != 0:
             return Z, np.full((Z.shape[1], Z.shape[1]), np.nan)
-        # Qn ← Qn L⁻ᵀ in place on the column-major block (BLAS trsm, side = right)
-        Qn = scipy.linalg.blas.dtrsm(1.0, L, np.asfortranarray(Qn), side=1, lower=1,
-                                     trans_a=1, overwrite_b=Qn is not Z)
+        # Qn ← Qn L⁻ᵀ on the column-major block (BLAS trsm, side = right); the first pass
+        # writes a copy, so that Z stays intact for the caller's Householder fallback
+        Qn = scipy.linalg.blas.dtrsm(1.0, L, Qn, side=1, lower=1, trans_a=1,
+                                     overwrite_b=it > 0 or Qn is not Z)
         R = L.T @ R
     return Qn, R
+
+
+def _project_out(Z: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """``c = Qᵀ Z`` and ``Z ← Z − Q c`` in place (``Z``, ``Q`` column-major: two BLAS ``gemm``
+    calls, the second accumulating into ``Z`` without a temporary)."""
+    c = scipy.linalg.blas.dgemm(1.0, Q, Z, trans_a=1)
+    scipy.linalg.blas.dgemm(-1.0, Q, c, beta=1.0, c=Z, overwrite_c=1)
+    return c
 
 
 def _orthonormalize(Z: np.ndarray, Q: np.ndarray, lo: int, rng: np.random.Generator):
     """``(C, Qn, R)`` with ``Z = Q C + Qn R``, ``Qn`` orthonormal and ⟂ ``Q``; columns of ``Z``
     that are (numerically) in ``span Q`` are replaced by random directions with ``R = 0``.
+    ``Z`` (column-major) is overwritten.
 
-    Gram–Schmidt twice against ``Q[:, lo:]`` (the last blocks, the only ones ``Z`` is not
-    orthogonal to in exact arithmetic: the Lanczos recurrence), then once against the older
-    columns ``Q[:, :lo]`` (full reorthogonalization, removing what rounding left; a float32
+    Gram–Schmidt against ``Q[:, lo:]`` (the last blocks, the only ones ``Z`` is not
+    orthogonal to in exact arithmetic: the Lanczos recurrence), then a second pass against
+    the whole ``Q`` (the local part's second pass, where the cancellation is, and the full
+    reorthogonalization against the older columns, removing what rounding left; a float32
     copy of ``Q`` for this pass was tried and breaks convergence: ``T`` amplifies what it
-    leaves).  The pass over the old columns, two reads of ``Q``, is most of the cost.
+    leaves).  That second pass is most of the cost: one read of ``Q`` for its coefficients,
+    and a second for the update only when the older columns' share exceeds
+    :data:`ORTH_LEVEL` (else the local share alone is subtracted).  Norms come from the
+    ``b × b`` Gram matrices (one read of ``Z`` each), which Cholesky QR reuses.
     """
+    Z = np.asfortranarray(Z)  # (no copy for the solver's blocks, which are column-major)
     C = np.zeros((Q.shape[1], Z.shape[1]))
-    norm0 = np.linalg.norm(Z, axis=0)
-    Ql = Q[:, lo:]
-    for _ in range(2):  # local part: two passes (where the cancellation is)
-        c = Ql.T @ Z
-        Z -= Ql @ c
-        C[lo:] += c
-    if lo:  # older part: one pass, its coefficients are rounding-sized
-        Qo = Q[:, :lo]
-        c = Qo.T @ Z
-        Z -= Qo @ c
-        C[:lo] = c
-    ratio = np.linalg.norm(Z, axis=0) / np.maximum(norm0, 1e-300)
-    if ratio.min() < 1e-3:  # strong cancellation: what is left may lean on Q; pass again
-        c = Q.T @ Z
-        Z -= Q @ c
+    norm0 = np.sqrt(np.maximum(np.diag(Z.T @ Z), 0.0))
+    if lo < Q.shape[1]:
+        C[lo:] = _project_out(Z, Q[:, lo:])
+    # second pass: its coefficients against the whole basis (one read of Q); the older
+    # columns' share is subtracted only when it is above ORTH_LEVEL · ‖Z‖ (a second read of
+    # Q), else only the local one
+    c = scipy.linalg.blas.dgemm(1.0, Q, Z, trans_a=1)
+    zn = np.sqrt(np.maximum(np.diag(Z.T @ Z), 0.0))
+    if lo and np.all(np.abs(c[:lo]).max(axis=0) <= ORTH_LEVEL * zn):
+        scipy.linalg.blas.dgemm(-1.0, Q[:, lo:], c[lo:], beta=1.0, c=Z, overwrite_c=1)
+        C[lo:] += c[lo:]  # (the older share, ≤ ORTH_LEVEL, stays in the new block)
+    else:
+        scipy.linalg.blas.dgemm(-1.0, Q, c, beta=1.0, c=Z, overwrite_c=1)
         C += c
-        ratio = np.linalg.norm(Z, axis=0) / np.maximum(norm0, 1e-300)
-    Qn, R = _cholqr(Z)
+    G = Z.T @ Z
+    ratio = np.sqrt(np.maximum(np.diag(G), 0.0)) / np.maximum(norm0, 1e-300)
+    if ratio.min() < 1e-3:  # strong cancellation: what is left may lean on Q; pass again
+        C += _project_out(Z, Q)
+        G = Z.T @ Z
+        ratio = np.sqrt(np.maximum(np.diag(G), 0.0)) / np.maximum(norm0, 1e-300)
+    Qn, R = _cholqr(Z, G)
     bad = ~np.isfinite(np.diag(R)) | (ratio <= 1e-11)
     if bad.any():  # breakdown: an invariant subspace was found; go on with new directions
         Qn, R = np.linalg.qr(Z)  # Householder, stable on a rank-deficient block
@@ -236,6 +276,15 @@ def _orthonormalize(Z: np.ndarray, Q: np.ndarray, lo: int, rng: np.random.Genera
     return C, Qn, R
 
 
+def _rotate_in_place(Q: np.ndarray, m: int, S: np.ndarray, rows: int = 32768) -> None:
+    """``Q[:, :q] ← Q[:, :m] S`` (``S``: ``m × q``, ``q <= m``) in place, a slab of rows at a
+    time: each slab of the product needs only the same rows of ``Q``, so no ``n × q``
+    temporary is made (at 445K vertices and q = 180 that was 0.6 GB and a copy into ``Q``)."""
+    q = S.shape[1]
+    for r in range(0, Q.shape[0], rows):
+        Q[r:r + rows, :q] = Q[r:r + rows, :m] @ S
+
+
 def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
                   tol: float = 1e-8, block: int | None = None, basis: int | None = None,
                   max_restarts: int = 12, backend: str = "auto", keep: int | None = None):
@@ -251,8 +300,11 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
             estimate; the residual recomputed from the float64 vectors must then be below
             ``max(tol, ACCEPT)``.
         block: block size ``b`` (right-hand sides per solve); default :func:`default_block`.
-        basis: basis size ``m`` at which a thick restart happens; default ``k + max(2k, 6b)``,
-            capped at ``n − b``.
+        basis: basis size ``m`` at which a thick restart happens; default ``k + max(3k, 6b)``,
+            capped at ``n − b``: room for the whole Krylov space that k = 50 … 200 needed
+            on real meshes (3.8k … 2.7k vectors at b = 4), so that a restart (a product of the
+            basis with the Ritz vectors, and the information it drops) is the exception.
+            Only the columns written are touched in memory.
         max_restarts: restarts before giving up (:class:`BSFError`, never a partial result).
         backend: linear solver, see :func:`factorize`.
         keep: Ritz vectors kept at a restart; default ``k + 2(m − k)/5``.
@@ -268,7 +320,7 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
     b = int(block) if block is not None else default_block(k)
     if b < 1 or k + 2 * b > n:
         raise BSFError(f"block_lanczos needs k + 2*block <= n, got k={k}, block={b}, n={n}")
-    m = int(basis) if basis is not None else k + max(2 * k, 6 * b)
+    m = int(basis) if basis is not None else k + max(3 * k, 6 * b)
     m = min(m, n - b)
     keep = min(int(keep) if keep else k + 2 * (m - k) // 5, m - b)  # kept at a restart
     if keep < k:
@@ -280,8 +332,9 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
     solve = factorize(M, chosen)
     rng = np.random.default_rng(0)  # fixed start block and breakdown directions: deterministic
 
-    def T(X):
-        return d[:, None] * solve(d[:, None] * X).reshape(X.shape)
+    def T(X):  # rows contiguous for the solver, columns for the orthogonalization
+        Y = solve(np.multiply(d[:, None], X, order="C")).reshape(X.shape)
+        return np.multiply(d[:, None], Y, order="F")
 
     Q = np.empty((n, m + b), order="F")  # columns contiguous: blocks are written and read
     H = np.zeros((m + b, m + b))
@@ -297,7 +350,7 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
     def estimates(theta, S):
         # exact residuals of the Ritz pairs from the Krylov relation: T y − θ y = Q_new g with
         # g = H[new, :] s, and K y − λ y = −(K − σ) Q_new g / θ (one product with W)
-        Qnew = Q[:, n_exp:n_cols]
+        Qnew = np.ascontiguousarray(Q[:, n_exp:n_cols])  # rows contiguous for W @
         KQ = (W @ (Qnew / d[:, None])) / d[:, None] - sigma * Qnew
         G = H[n_exp:n_cols, :n_exp] @ S[:, :k]
         r2 = np.einsum("ij,ij->j", G, (KQ.T @ KQ) @ G)
@@ -346,8 +399,12 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
             if np.all(est <= tol):  # confirm with the true residuals
                 Y = Q[:, :n_exp] @ S[:, :k]
                 Phi = Y / d[:, None]
-                KY = (W @ Phi) / d[:, None]
-                res = np.linalg.norm(KY - lam[:k] * Y, axis=0) / scale_k
+                KY = W @ Phi
+                KY /= d[:, None]
+                Rk = Y * lam[:k]
+                np.subtract(KY, Rk, out=Rk)
+                res = np.sqrt(np.einsum("ij,ij->j", Rk, Rk)) / scale_k
+                del Rk
                 if np.all(res <= max(tol, ACCEPT)):
                     timing["rayleigh_ritz"] += time.perf_counter() - t0
                     missed = _missed_eigenvalues(T, W, d, Y, KY, lam[:k], b, rng)
@@ -366,12 +423,11 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
                            f"restarts (largest relative residual {est.max():.2e} > tol={tol:g})")
         # thick restart: the `keep` best Ritz vectors, then the unexpanded block
         t0 = time.perf_counter()
-        Y = Q[:, :n_exp] @ S[:, :keep]
         coupling = H[n_exp:n_cols, :n_exp] @ S[:, :keep]
         tail = Q[:, n_exp:n_cols].copy()
         nb = tail.shape[1]
+        _rotate_in_place(Q, n_exp, np.ascontiguousarray(S[:, :keep]))
         H[:] = 0.0
-        put(0, Y)
         H[:keep, :keep] = np.diag(theta[:keep])
         put(keep, tail)
         H[keep:keep + nb, :keep] = coupling

@@ -147,14 +147,14 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
 
             * ``"auto"`` (default): ``"dense"`` when ``n <= DENSE_LIMIT``, else ``"block"``
               when the optional CHOLMOD backend (``pip install 'bsfjax[fast]'``, the
-              ``cholespy`` package) is installed and ``n ≥ BLOCK_MIN_VERTICES`` (40K: below,
-              ARPACK is faster), else ``"lanczos"``.
-            * ``"block"``: thick-restart block Lanczos on ``(W − σA)⁻¹`` (:mod:`._eigensolver`),
+              ``cholespy`` package) is installed and ``n ≥ BLOCK_MIN_VERTICES`` (20K), else
+              ``"lanczos"``.
+            * ``"block"``: block Lanczos on ``(W − σA)⁻¹`` (:mod:`._eigensolver`),
               exact: every pair reaches ``‖Kψ − λψ‖ ≤ 10⁻⁸ λ_k`` by the Krylov estimate and
               ``≤ 10⁻⁶ λ_k`` recomputed (``K = A^-½ W A^-½``, ``ψ = A^½ φ``); on the TOSCA cat
-              (111K / 445K vertices, k = 100) eigenvalues agree with ARPACK's to 3e-13 / 8e-13
-              relative and the eigenspaces to a principal-angle sine of 8e-7, at 1.9–2.0× /
-              2.0–2.3× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without
+              (111K / 445K vertices, k = 100) eigenvalues agree with ARPACK's to 4e-13 / 8e-13
+              relative and the eigenspaces to a principal-angle sine of 1.2e-6, at 2.6–3.0× /
+              2.4–3.5× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without
               CHOLMOD it uses scipy's SuperLU, which solves one column at a time: slower than
               ``"lanczos"``.
               Shapes with exact eigenvalue multiplicities above the block size (spheres,
@@ -167,12 +167,13 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
               for users who want speed over exactness.  Error bounds: eigenvalue error
               ``≤ ‖r‖`` (Bauer–Fike), in practice ``≈ ‖r‖² / gap``; eigenvector angle
               ``≤ ‖r‖ / gap`` to the eigenspace.  Measured on the TOSCA cat (k = 100): the
-              largest recomputed residual was 6e-4 (111K) / 2.4e-4 (445K) λ_k, eigenvalues
-              within 3.5e-13 / 7.5e-13 relative of ARPACK's, eigenspaces of the first 25/50/100
-              vectors within a principal-angle sine of 6e-7 (the residual lies in high
-              frequencies, far from the wanted eigenvalues), and the BSF transfer error of
-              ``bench_large.py`` unchanged (``docs/benchmarks.md``); it is only 1.1–1.2×
-              faster than ``"block"`` there, because the block method converges abruptly.
+              largest recomputed residual was 8.6e-4 (111K) / 5.3e-4 (445K) λ_k, eigenvalues
+              within 3.5e-13 / 7.0e-13 relative of ARPACK's, eigenspaces of the first
+              25/50/100 vectors within a principal-angle sine of 1.2e-6 (the residual lies in
+              high frequencies, far from the wanted eigenvalues), and the BSF transfer error of
+              ``bench_large.py`` unchanged at stop 24 (``docs/benchmarks.md``); it is only
+              1.0–1.2× faster than ``"block"`` there, because the block method converges
+              abruptly.
 
     Uses a fixed start (deterministic).  Eigenvectors are A-orthonormalized and sign-fixed.
     Non-convergence raises :class:`BSFError` (never a partial result).
@@ -243,10 +244,13 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
     return Spectrum(evals=evals, evecs=evecs, mass=a)
 
 
-#: ``method="auto"`` takes the block solver from this many vertices on: below, ARPACK is as
-#: fast or faster (k = 100, measured on one run: 6.9K vertices 0.53 s against 1.43 s; 10K
-#: 1.5 s against 2.4 s; 27.9K 5.1 s against 5.2 s; 111K: the block solver 1.85–2×).
-BLOCK_MIN_VERTICES = 40_000
+#: ``method="auto"`` takes the block solver from this many vertices on.  Measured at stop 25
+#: (block solver against ARPACK, best of two, 2 cores): k = 100, 6.9K vertices 0.37 s against
+#: 0.46 s, 10K 0.53 s against 0.71 s, 27.9K 1.45 s against 3.19 s; k = 30, 6.9K 0.15 s against
+#: 0.11 s, 10K 0.21 s against 0.19 s, 27.9K 0.59 s against 0.63 s.  From 20K it is as fast at
+#: small k and much faster at large k; below, the gain at k = 100 is small and the spectra of
+#: the FAUST-sized meshes every documented result was computed with stay ARPACK's.
+BLOCK_MIN_VERTICES = 20_000
 
 
 def _resolve_method(method: str, n: int, k: int) -> str:

@@ -87,7 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output .npz with evals, evecs, mass")
     p.add_argument("--method", choices=("auto", "block", "lanczos", "dense", "fast"),
                    default="auto", help="eigensolver, as bsfjax.spectrum's method: auto "
-                   "(default: dense for small meshes, block Lanczos with CHOLMOD from 40K "
+                   "(default: dense for small meshes, block Lanczos with CHOLMOD from 20K "
                    "vertices, else ARPACK), block, lanczos (ARPACK), dense (LAPACK, small "
                    "meshes), fast (approximate block solver)")
     p.set_defaults(func=_cmd_spectrum)

@@ -11,7 +11,8 @@ import scipy.sparse as sp
 
 import bsfjax
 from bsfjax import BSFError
-from bsfjax._eigensolver import MissedEigenvalue, block_lanczos, factorize, has_cholmod
+from bsfjax._eigensolver import ORTH_LEVEL, MissedEigenvalue, _cholqr, _orthonormalize, \
+    _rotate_in_place, block_lanczos, factorize, has_cholmod
 from bsfjax._spectrum import interval_operators
 
 from .conftest import icosphere
@@ -133,6 +134,44 @@ def test_probe_catches_a_missed_multiplicity():
     a = A.diagonal()
     with pytest.raises(MissedEigenvalue, match="missed 1 eigenvalue"):
         block_lanczos(W, a, 10, _sigma(W, a), tol=1e-3, backend="superlu")
+
+
+@pytest.mark.parametrize("older", ["tiny", "large"])
+def test_orthonormalize_keeps_the_krylov_relation(older):
+    # Z = Q C + Qn R with Qn orthonormal and ⟂ Q, whether the older columns' share is below
+    # ORTH_LEVEL (update skipped: the share stays in Qn, within the level) or above it
+    rng = np.random.default_rng(3)
+    n, m, b, lo = 500, 40, 4, 32
+    Q = np.asfortranarray(np.linalg.qr(rng.standard_normal((n, m)))[0])
+    coef = rng.standard_normal((m, b))
+    coef[:lo] *= 1e-15 if older == "tiny" else 1.0
+    P = rng.standard_normal((n, b))
+    for _ in range(2):
+        P -= Q @ (Q.T @ P)  # the new directions, ⟂ Q
+    Z = np.asfortranarray(Q @ coef + P)
+    Z0 = Z.copy()
+    C, Qn, R = _orthonormalize(Z, Q, lo, rng)
+    assert abs(Qn.T @ Qn - np.eye(b)).max() < 1e-13
+    assert abs(Q.T @ Qn).max() < (ORTH_LEVEL if older == "tiny" else 1e-14)
+    np.testing.assert_allclose(Q @ C + Qn @ R, Z0, atol=1e-12)
+    np.testing.assert_allclose(C, coef, atol=1e-12)
+
+
+def test_cholqr_and_in_place_rotation():
+    rng = np.random.default_rng(4)
+    Z = np.asfortranarray(rng.standard_normal((300, 6)) * np.array([1, 10, 1e3, 1, 1, 1e-2]))
+    Z0 = Z.copy()
+    for G in (None, Z.T @ Z):
+        Qn, R = _cholqr(Z, G)
+        assert abs(Qn.T @ Qn - np.eye(6)).max() < 1e-14
+        np.testing.assert_allclose(Qn @ R, Z0, rtol=0, atol=1e-12 * abs(Z0).max())
+        assert np.array_equal(Z, Z0)  # the input stays intact (the caller's fallback needs it)
+    assert np.isnan(np.diag(_cholqr(np.ones((50, 3)))[1])).all()  # rank deficient
+    Q = np.asfortranarray(rng.standard_normal((1000, 12)))
+    S = rng.standard_normal((10, 7))
+    want = Q[:, :10] @ S
+    _rotate_in_place(Q, 10, S, rows=64)  # slabs that do not divide the rows
+    np.testing.assert_allclose(Q[:, :7], want, rtol=1e-13, atol=1e-13)
 
 
 def test_errors_are_clear():
