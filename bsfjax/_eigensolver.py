@@ -21,22 +21,21 @@ to a whole block of ``b`` right-hand sides at a time.  Against ARPACK's single-v
   threads) was measured and not taken: 8 ms per vector in blocks of 12, a 0.8 s factor
   against CHOLMOD's 1.1 s, for a dependency of several hundred MB.
 
-The price: a block Krylov space needs more solves than ARPACK's single-vector one (332
-against ~300 for k = 100 at b = 4), and the orthogonalization, bound by memory bandwidth, is
-a third of the time.  What makes that pass cheap (stop 25): the basis is column-major (a block
-is one contiguous slice), each Gram–Schmidt update is one ``gemm`` accumulating in place, the
-norms come from the block's Gram matrix, and the update against the older columns, whose
-share is rounding-sized, is applied only when it exceeds :data:`ORTH_LEVEL` (one read of the
-basis instead of two for a third of the blocks).  With that pass cheaper, the small block
-(b = 4 for k = 100) and a basis with room for the whole Krylov space (no restart) win:
-2.6–3.0× ARPACK at 111K vertices and 2.4–3.5× at 445K over three runs
-(``docs/benchmarks.md``).  Tried and dropped: a
-float32 copy of ``Q`` for the reorthogonalization (``T`` amplifies its errors; no
-convergence), larger blocks (more solves, no cheaper per vector past ~16), shifts closer to
-the spectrum (no change), CHOLMOD calls of four columns each (level in the loop), a
-supernodal factor (cvxopt's CHOLMOD: a 2 s factor at 445K against 6–8 s, but its solve runs
-one column at a time, 3–4× slower per vector) with a hand-written triangular solve on it
-(numba; slower than CHOLMOD's simplicial solve).
+The price: a block Krylov space needs more solves than ARPACK's single-vector one (332 against
+~300 for k = 100 at b = 4), and the orthogonalization, bound by memory bandwidth, is a third of
+the time. What makes that pass cheap (stop 25): the basis is column-major (a block is one
+contiguous slice), each Gram–Schmidt update is one ``gemm`` accumulating in place, the norms
+come from the block's Gram matrix, and the update against the older columns, whose share is
+rounding-sized, is applied only when it exceeds :data:`ORTH_LEVEL` (one read of the basis
+instead of two for a third to a half of the blocks). With that pass cheaper, the small block
+(b = 4 for k = 100) and a basis with room for the whole Krylov space (no restart) win: 2.6–3.0×
+ARPACK at 111K vertices and 2.4–3.5× at 445K over three runs (``docs/benchmarks.md``). Tried
+and dropped: a float32 copy of ``Q`` for the reorthogonalization (``T`` amplifies its errors;
+no convergence), larger blocks (more solves, no cheaper per vector past ~16), shifts closer to
+the spectrum (no change), CHOLMOD calls of four columns each (level in the loop), a supernodal
+factor (cvxopt's CHOLMOD: a 2 s factor at 445K against 6–8 s, but its solve runs one column at
+a time, 3–4× slower per vector) with a hand-written triangular solve on it (numba; slower than
+CHOLMOD's simplicial solve).
 
 Projected matrix and restart.  Every time ``T`` is applied to a block ``X`` of the basis, the
 Gram–Schmidt coefficients ``C = Qᵀ T X`` and the triangular factor ``R`` of the remainder
@@ -86,8 +85,12 @@ ACCEPT = 1e-6
 #: block's norm.  It is measured for every block (one read of the basis) and restored by a
 #: full Gram–Schmidt update (a second read) only when exceeded; between that and eps the
 #: Lanczos recurrence is unaffected (semi-orthogonality needs ≤ √eps ≈ 1.5e-8).  Measured,
-#: k = 100: a third of the blocks skip the update, the same number of solves, eigenvalues
-#: equal to 4e-15 and A-orthonormality 5e-13 (111K vertices); 1e-8 stalled the convergence.
+#: k = 100 at 111K vertices: the share is ~1e-13 after a full update and ~1e-9 after a
+#: skipped one (``T`` amplifies it), so the blocks alternate and a third (b = 8) to a half
+#: (b = 4) of them skip the update, with the same number of solves, eigenvalues equal to
+#: 4e-15 and A-orthonormality 5e-13; 1e-10 behaved the same, 1e-8 stalled the convergence.
+#: Not measuring the block after a full update at all (its share is ~1e-13) was tried: 30 %
+#: less orthogonalization time, but the test sphere's eigenspaces drifted to a sine of 4e-6.
 ORTH_LEVEL = 1e-12
 
 
