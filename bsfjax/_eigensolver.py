@@ -215,12 +215,22 @@ def _cholqr(Z: np.ndarray, G: np.ndarray | None = None):
     return Qn, R
 
 
-def _project_out(Z: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """``c = Qᵀ Z`` and ``Z ← Z − Q c`` in place (``Z``, ``Q`` column-major: two BLAS ``gemm``
-    calls, the second accumulating into ``Z`` without a temporary)."""
-    c = scipy.linalg.blas.dgemm(1.0, Q, Z, trans_a=1)
+def _subtract(Z: np.ndarray, Q: np.ndarray, c: np.ndarray) -> None:
+    """``Z ← Z − Q c`` in place (``Z``, ``Q`` column-major: one BLAS ``gemm`` accumulating into
+    ``Z``, no temporary)."""
     scipy.linalg.blas.dgemm(-1.0, Q, c, beta=1.0, c=Z, overwrite_c=1)
+
+
+def _project_out(Z: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """``c = Qᵀ Z`` and ``Z ← Z − Q c`` in place; returns ``c``."""
+    c = scipy.linalg.blas.dgemm(1.0, Q, Z, trans_a=1)
+    _subtract(Z, Q, c)
     return c
+
+
+def _column_norms(G: np.ndarray) -> np.ndarray:
+    """The column norms of ``Z`` from its Gram matrix ``G = ZᵀZ``."""
+    return np.sqrt(np.maximum(np.diag(G), 0.0))
 
 
 def _orthonormalize(Z: np.ndarray, Q: np.ndarray, lo: int, rng: np.random.Generator):
@@ -240,26 +250,26 @@ def _orthonormalize(Z: np.ndarray, Q: np.ndarray, lo: int, rng: np.random.Genera
     """
     Z = np.asfortranarray(Z)  # (no copy for the solver's blocks, which are column-major)
     C = np.zeros((Q.shape[1], Z.shape[1]))
-    norm0 = np.sqrt(np.maximum(np.diag(Z.T @ Z), 0.0))
+    norm0 = _column_norms(Z.T @ Z)
     if lo < Q.shape[1]:
         C[lo:] = _project_out(Z, Q[:, lo:])
     # second pass: its coefficients against the whole basis (one read of Q); the older
     # columns' share is subtracted only when it is above ORTH_LEVEL · ‖Z‖ (a second read of
     # Q), else only the local one
     c = scipy.linalg.blas.dgemm(1.0, Q, Z, trans_a=1)
-    zn = np.sqrt(np.maximum(np.diag(Z.T @ Z), 0.0))
+    zn = _column_norms(Z.T @ Z)
     if lo and np.all(np.abs(c[:lo]).max(axis=0) <= ORTH_LEVEL * zn):
-        scipy.linalg.blas.dgemm(-1.0, Q[:, lo:], c[lo:], beta=1.0, c=Z, overwrite_c=1)
+        _subtract(Z, Q[:, lo:], c[lo:])
         C[lo:] += c[lo:]  # (the older share, ≤ ORTH_LEVEL, stays in the new block)
     else:
-        scipy.linalg.blas.dgemm(-1.0, Q, c, beta=1.0, c=Z, overwrite_c=1)
+        _subtract(Z, Q, c)
         C += c
     G = Z.T @ Z
-    ratio = np.sqrt(np.maximum(np.diag(G), 0.0)) / np.maximum(norm0, 1e-300)
+    ratio = _column_norms(G) / np.maximum(norm0, 1e-300)
     if ratio.min() < 1e-3:  # strong cancellation: what is left may lean on Q; pass again
         C += _project_out(Z, Q)
         G = Z.T @ Z
-        ratio = np.sqrt(np.maximum(np.diag(G), 0.0)) / np.maximum(norm0, 1e-300)
+        ratio = _column_norms(G) / np.maximum(norm0, 1e-300)
     Qn, R = _cholqr(Z, G)
     bad = ~np.isfinite(np.diag(R)) | (ratio <= 1e-11)
     if bad.any():  # breakdown: an invariant subspace was found; go on with new directions
