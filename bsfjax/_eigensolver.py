@@ -218,6 +218,8 @@ def _cholqr(Z: np.ndarray, G: np.ndarray | None = None):
 def _subtract(Z: np.ndarray, Q: np.ndarray, c: np.ndarray) -> None:
     """``Z ← Z − Q c`` in place (``Z``, ``Q`` column-major: one BLAS ``gemm`` accumulating into
     ``Z``, no temporary)."""
+    # f2py would silently copy a Z that is not column-major float64 and leave Z unchanged
+    assert Z.flags.f_contiguous and Z.dtype == np.float64
     scipy.linalg.blas.dgemm(-1.0, Q, c, beta=1.0, c=Z, overwrite_c=1)
 
 
