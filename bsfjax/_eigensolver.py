@@ -98,16 +98,16 @@ class MissedEigenvalue(BSFError):
     """The converged pairs are not the smallest ones: a probe found a direction below λ_k."""
 
 
-def _missed_eigenvalues(T, W, d, Y, KY, lam, b, rng, steps: int = 2) -> int:
+def _missed_eigenvalues(T, W, d, Y, YKY, lam, b, rng, steps: int = 2) -> int:
     """How many eigenvalues below ``λ_k`` the converged Ritz pairs ``(lam, Y)`` skipped.
 
     A Krylov method can converge to ``k`` true eigenpairs that are not the ``k`` smallest: a
     multiplicity above the block size is only found through rounding.  Probe: ``b`` random
     directions, deflated against ``Y`` and sharpened by ``steps`` applications of ``T``, then
-    Rayleigh–Ritz on ``[Y, probe]`` (``KY = K Y`` is given: the caller's residual check has
-    it).  By min–max, a Ritz value of that space below ``λ_k (1 − 10⁻⁴)`` beyond those of
-    ``Y`` proves an eigenvalue was missed (the margin covers the ``"fast"`` tolerance); none
-    found is evidence, not proof (as for ARPACK).
+    Rayleigh–Ritz on ``[Y, probe]`` (``YKY = Yᵀ K Y`` is given: the caller has it from the
+    Krylov relation).  By min–max, a Ritz value of that space below ``λ_k (1 − 10⁻⁴)``
+    beyond those of ``Y`` proves an eigenvalue was missed (the margin covers the ``"fast"``
+    tolerance); none found is evidence, not proof (as for ARPACK).
     """
     P = rng.standard_normal((Y.shape[0], b))
     for _ in range(steps):
@@ -120,7 +120,7 @@ def _missed_eigenvalues(T, W, d, Y, KY, lam, b, rng, steps: int = 2) -> int:
     # [Y, P] is orthonormal (Y: Ritz vectors of an orthonormal basis; P ⟂ Y twice), so the
     # projected pencil is standard; its blocks from the products already at hand
     YKP = Y.T @ KP
-    H = np.block([[Y.T @ KY, YKP], [YKP.T, P.T @ KP]])
+    H = np.block([[YKY, YKP], [YKP.T, P.T @ KP]])
     mu = scipy.linalg.eigh(0.5 * (H + H.T), eigvals_only=True)
     cut = lam[-1] * (1 - 1e-4)
     return max(0, int(np.sum(mu < cut)) - int(np.sum(lam < cut)))
@@ -233,6 +233,23 @@ def _project_out(Z: np.ndarray, Q: np.ndarray) -> np.ndarray:
 def _column_norms(G: np.ndarray) -> np.ndarray:
     """The column norms of ``Z`` from its Gram matrix ``G = ZᵀZ``."""
     return np.sqrt(np.maximum(np.diag(G), 0.0))
+
+
+def _residual_norms(W: sp.csr_matrix, d: np.ndarray, Y: np.ndarray, lam: np.ndarray):
+    """``‖K y_i − λ_i y_i‖`` for the columns of ``Y`` (``K = D⁻¹ W D⁻¹``), a few columns at a
+    time: temporaries of ≤ 16 MB, which the allocator reuses, instead of ``n × k`` ones (each
+    a fresh mapping to fault in: 0.6–1 s per 357 MB array at 445K vertices on the benchmark
+    machine)."""
+    n, k = Y.shape
+    chunk = max(1, (1 << 21) // n)
+    res = np.empty(k)
+    for j in range(0, k, chunk):
+        Yj = Y[:, j:j + chunk]
+        R = W @ np.divide(Yj, d[:, None], order="C")
+        R /= d[:, None]
+        R -= Yj * lam[j:j + chunk]
+        res[j:j + chunk] = np.sqrt(np.einsum("ij,ij->j", R, R))
+    return res
 
 
 def _orthonormalize(Z: np.ndarray, Q: np.ndarray, lo: int, rng: np.random.Generator):
@@ -369,11 +386,12 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
         KQ = (W @ (Qnew / d[:, None])) / d[:, None] - sigma * Qnew
         G = H[n_exp:n_cols, :n_exp] @ S[:, :k]
         r2 = np.einsum("ij,ij->j", G, (KQ.T @ KQ) @ G)
-        return np.sqrt(np.maximum(r2, 0.0)) / np.abs(theta[:k])
+        return np.sqrt(np.maximum(r2, 0.0)) / np.abs(theta[:k]), KQ, G
 
     checked = -1  # basis size at the last convergence check
     while True:
         full = n_cols + (n_cols - n_exp) > m + b
+        rotated = 0  # Ritz vectors written over Q[:, :rotated] by a failed confirmation
         if not full:  # expand the next unexpanded block
             X = Q[:, n_exp:n_cols]
             t0 = time.perf_counter()
@@ -403,7 +421,8 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
             theta, S = theta[::-1], S[:, ::-1]  # largest θ = smallest λ first
             lam = sigma + 1.0 / theta[:keep]
             scale_k = max(abs(lam[k - 1]), np.finfo(float).tiny)
-            est = estimates(theta, S) / scale_k
+            est, KQ, G = estimates(theta, S)
+            est /= scale_k
             # next check: where the geometric decay of the largest residual since the last
             # check reaches tol (each check costs an eigh of H and a product with W)
             gap = 2
@@ -412,42 +431,47 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
                 gap = int(np.clip(0.8 * np.log(tol / est.max()) / np.log(rate), 1, 8))
             next_check, last = blocks + gap, (blocks, float(est.max()))
             if np.all(est <= tol):  # confirm with the true residuals
-                Y = Q[:, :n_exp] @ S[:, :k]
-                Phi = Y / d[:, None]
-                KY = W @ Phi
-                KY /= d[:, None]
-                Rk = Y * lam[:k]
-                np.subtract(KY, Rk, out=Rk)
-                res = np.sqrt(np.einsum("ij,ij->j", Rk, Rk)) / scale_k
-                del Rk
+                # the Ritz vectors in place, Q[:, :k] ← Q S[:, :k] (no n × k temporary:
+                # fresh memory is slow to fault in); should the confirmation fail, this is
+                # a thick restart that keeps k vectors
+                _rotate_in_place(Q, n_exp, np.ascontiguousarray(S[:, :k]))
+                rotated = k
+                Y = Q[:, :k]
+                res = _residual_norms(W, d, Y, lam[:k]) / scale_k
                 if np.all(res <= max(tol, ACCEPT)):
                     timing["rayleigh_ritz"] += time.perf_counter() - t0
-                    missed = _missed_eigenvalues(T, W, d, Y, KY, lam[:k], b, rng)
+                    # Yᵀ K Y = Λ + Yᵀ R from the Krylov relation R = −(K − σ) Q_new G Θ⁻¹
+                    # (one read of Y, b columns, instead of K applied to all of Y)
+                    YKY = np.diag(lam[:k]) - (Y.T @ KQ) @ (G / theta[:k])
+                    missed = _missed_eigenvalues(T, W, d, Y, YKY, lam[:k], b, rng)
                     if missed:
                         raise MissedEigenvalue(
                             f"block Lanczos missed {missed} eigenvalue(s) below λ_k = "
                             f"{lam[k - 1]:.6g} (a multiplicity above block={b}?)")
                     info = dict(solves=solves, restarts=restarts, backend=chosen,
                                 residual=float(res.max()), seconds=timing)
-                    return lam[:k], Phi, info
+                    return lam[:k], Y / d[:, None], info
             timing["rayleigh_ritz"] += time.perf_counter() - t0
-        if not full:
+        if not (full or rotated):
             continue
         if restarts >= max_restarts:
             raise BSFError(f"block Lanczos did not converge for k={k} in {max_restarts} "
                            f"restarts (largest relative residual {est.max():.2e} > tol={tol:g})")
-        # thick restart: the `keep` best Ritz vectors, then the unexpanded block
+        # thick restart: the best Ritz vectors (`keep` of them, or the k already written
+        # by a failed confirmation), then the unexpanded block
         t0 = time.perf_counter()
-        coupling = H[n_exp:n_cols, :n_exp] @ S[:, :keep]
-        tail = Q[:, n_exp:n_cols].copy()
+        nk = rotated or keep
+        coupling = H[n_exp:n_cols, :n_exp] @ S[:, :nk]
+        tail = Q[:, n_exp:n_cols].copy()  # (columns past nk: a rotation leaves them intact)
         nb = tail.shape[1]
-        _rotate_in_place(Q, n_exp, np.ascontiguousarray(S[:, :keep]))
+        if not rotated:
+            _rotate_in_place(Q, n_exp, np.ascontiguousarray(S[:, :nk]))
         H[:] = 0.0
-        H[:keep, :keep] = np.diag(theta[:keep])
-        put(keep, tail)
-        H[keep:keep + nb, :keep] = coupling
-        H[:keep, keep:keep + nb] = coupling.T
-        n_exp, n_cols, lo = keep, keep + nb, 0
+        H[:nk, :nk] = np.diag(theta[:nk])
+        put(nk, tail)
+        H[nk:nk + nb, :nk] = coupling
+        H[:nk, nk:nk + nb] = coupling.T
+        n_exp, n_cols, lo = nk, nk + nb, 0
         checked = -1  # a new basis: no check of it yet (n_exp may repeat an earlier value)
         restarts += 1
         timing["rayleigh_ritz"] += time.perf_counter() - t0

@@ -174,6 +174,50 @@ def test_cholqr_and_in_place_rotation():
     np.testing.assert_allclose(Q[:, :7], want, rtol=1e-13, atol=1e-13)
 
 
+def test_probe_gets_the_rayleigh_block_from_the_krylov_relation(monkeypatch):
+    # the probe's Yᵀ K Y comes from the Krylov relation (Λ − (Yᵀ (K − σ) Q_new) G Θ⁻¹), not
+    # from K applied to all of Y: it must equal the direct product to rounding
+    import bsfjax._eigensolver as E
+    seen = {}
+    probe = E._missed_eigenvalues
+
+    def spy(T, W, d, Y, YKY, lam, b, rng, **kw):
+        seen.update(W=W, d=d, Y=np.array(Y), YKY=YKY, lam=lam)
+        return probe(T, W, d, Y, YKY, lam, b, rng, **kw)
+    monkeypatch.setattr(E, "_missed_eigenvalues", spy)
+    W, a = interval_operators(1200)
+    # a loose tolerance (the "fast" method's), so that Yᵀ K Y is visibly not Λ
+    lam, phi, _ = block_lanczos(W, a, 20, _sigma(W, a), tol=1e-3)
+    d, Y = seen["d"], seen["Y"]
+    direct = Y.T @ ((W @ (Y / d[:, None])) / d[:, None])
+    off = abs(direct - np.diag(seen["lam"])).max()
+    assert off > 1e-11 * lam[-1]
+    assert abs(seen["YKY"] - direct).max() < 0.05 * off  # (measured: 2e-9 against 2e-7)
+    np.testing.assert_allclose(Y / d[:, None], phi, rtol=0, atol=1e-14)
+
+
+def test_failed_confirmation_restarts_from_the_ritz_vectors(monkeypatch):
+    # the confirmation writes the Ritz vectors over the basis; if the true residuals fail,
+    # that is a thick restart keeping k vectors, and the solver goes on to the same pairs
+    import bsfjax._eigensolver as E
+    W, a = interval_operators(1500)
+    lam0, phi0, info0 = block_lanczos(W, a, 16, _sigma(W, a))
+    calls = []
+    real = E._residual_norms
+
+    def fail_once(*args):
+        res = real(*args)
+        calls.append(res)
+        return res + (1.0 if len(calls) == 1 else 0.0)
+    monkeypatch.setattr(E, "_residual_norms", fail_once)
+    lam, phi, info = block_lanczos(W, a, 16, _sigma(W, a))
+    assert len(calls) >= 2 and info["restarts"] == info0["restarts"] + 1
+    assert info["solves"] > info0["solves"]
+    np.testing.assert_allclose(lam[1:], lam0[1:], rtol=1e-10)
+    assert abs(phi.T @ (a[:, None] * phi) - np.eye(16)).max() < 1e-10
+    assert abs(np.abs(np.einsum("ij,i,ij->j", phi, a, phi0)) - 1).max() < 1e-8
+
+
 def test_errors_are_clear():
     W, a = interval_operators(800)
     with pytest.raises(BSFError, match="did not converge"):

@@ -170,3 +170,20 @@ def test_spectrum_k_errors(sphere_mesh):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         bsfjax.spectrum(sphere_mesh, 5)  # a clean connected mesh warns about nothing
+
+
+def test_signs_match_the_largest_magnitude_entry():
+    # _signs reads each column's largest and smallest entries instead of |evecs|: the same
+    # rule as the sign of argmax |x| (first index on a tie), +1 for a zero column
+    from bsfjax._spectrum import _signs
+    rng = np.random.default_rng(5)
+    X = rng.standard_normal((200, 30))
+    X[:, 3] = 0.0
+    X[:4, 4], X[4:, 4] = [0.5, -0.5, 0.1, 0.0], 0.0   # tie, the positive entry first
+    X[:4, 5], X[4:, 5] = [-0.5, 0.5, 0.1, 0.0], 0.0   # tie, the negative entry first
+    X[:, 6] = -1.0                                     # constant negative column
+    idx = np.argmax(np.abs(X), axis=0)
+    want = np.sign(X[idx, np.arange(30)])
+    want[want == 0] = 1.0
+    np.testing.assert_array_equal(_signs(X), want)
+    assert list(_signs(X)[3:7]) == [1.0, 1.0, -1.0, -1.0]
