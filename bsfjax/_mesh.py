@@ -204,8 +204,13 @@ class MeshReport(NamedTuple):
 def n_components(mesh: "Mesh", edges: np.ndarray | None = None) -> int:
     """Connected components of the mesh's edge graph (an isolated vertex is one of its own);
     ``edges`` from :func:`mesh_edges` if already at hand."""
-    e = mesh_edges(mesh.faces)[0] if edges is None else edges
-    g = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(mesh.n_vertices,) * 2)
+    if edges is None:  # the faces' half-edges as they are: no de-duplication needed here
+        f = np.asarray(mesh.faces, dtype=np.int64)
+        e = np.stack([f.ravel(), np.roll(f, -1, axis=1).ravel()], axis=1)
+    else:
+        e = edges
+    g = sp.coo_matrix((np.ones(len(e), np.int32), (e[:, 0], e[:, 1])),
+                      shape=(mesh.n_vertices,) * 2).tocsr()
     return int(scipy.sparse.csgraph.connected_components(g, directed=False)[0])
 
 
