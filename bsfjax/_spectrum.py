@@ -158,8 +158,8 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
               exact: every pair reaches ``‖Kψ − λψ‖ ≤ 10⁻⁸ λ_k`` by the Krylov estimate and
               ``≤ 10⁻⁶ λ_k`` recomputed (``K = A^-½ W A^-½``, ``ψ = A^½ φ``); on the TOSCA cat
               (111K / 445K vertices, k = 100) eigenvalues agree with ARPACK's to 4e-13 / 8e-13
-              relative and the eigenspaces to a principal-angle sine of 1.2e-6, at 2.6–3.0× /
-              2.4–3.5× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without
+              relative and the eigenspaces to a principal-angle sine of 1.4e-6, at 3.0–3.1× /
+              3.2× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without
               CHOLMOD it uses scipy's SuperLU, which solves one column at a time: slower than
               ``"lanczos"``.
               Shapes with exact eigenvalue multiplicities above the block size (spheres,
