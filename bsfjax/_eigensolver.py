@@ -32,11 +32,11 @@ instead of two for a third to a half of the blocks). With that pass cheaper, the
 memory is slow to fault in on the benchmark machine, so (stop 26) the basis lives in its own
 anonymous map without huge pages, the Ritz vectors are written over it and returned in place,
 and no ``n × k`` temporary is made: 3.0–3.1× ARPACK at 111K vertices and 3.2× at 445K over
-three runs (``docs/benchmarks.md``).  Tried and dropped: a float32 copy of ``Q`` for the reorthogonalization (``T`` amplifies its errors;
-no convergence), larger blocks (more solves, no cheaper per vector past ~16), shifts closer to
-the spectrum (no change), CHOLMOD calls of four columns each (level in the loop), a supernodal
-factor (cvxopt's CHOLMOD: a 2 s factor at 445K against 6–8 s, but its solve runs one column at
-a time, 3–4× slower per vector) with a hand-written triangular solve on it (numba; slower than
+three runs (``docs/benchmarks.md``).  Tried and dropped: a float32 copy of ``Q`` for the
+reorthogonalization (``T`` amplifies its errors; no convergence), larger blocks (more solves,
+no cheaper per vector past ~16), shifts closer to the spectrum (no change), CHOLMOD calls of
+four columns each (level in the loop), a supernodal factor (cvxopt's CHOLMOD: a 2 s factor at
+445K against 6–8 s, but its solve runs one column at a time, 3–4× slower per vector) with a hand-written triangular solve on it (numba; slower than
 CHOLMOD's simplicial solve); a helper process with its own factor solving half of each block
 (two processes scale in isolation, 19 ms per vector each, but not inside the solver, where
 OpenBLAS's spinning idle thread takes the second core: no gain); the Gram–Schmidt products
