@@ -247,7 +247,8 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
     order = np.argsort(evals, kind="stable")
     if np.any(order != np.arange(len(order))):
         evals, evecs, norms = evals[order], evecs[:, order], norms[order]
-    evecs *= _signs(evecs) / norms
+    evecs /= norms  # (then the sign: the same arithmetic as a copy would do, to the bit)
+    evecs *= _signs(evecs)
     evals = np.maximum(evals, 0.0)
     return Spectrum(evals=evals, evecs=evecs, mass=a)
 
