@@ -218,6 +218,25 @@ def test_failed_confirmation_restarts_from_the_ritz_vectors(monkeypatch):
     assert abs(np.abs(np.einsum("ij,i,ij->j", phi, a, phi0)) - 1).max() < 1e-8
 
 
+def test_mapped_basis_and_released_tail():
+    # the basis lives in its own anonymous map; after the eigenvectors (its first k columns)
+    # are taken, the memory past them is given back: those pages read zeros, the columns
+    # kept are intact, also when they end inside a page
+    import mmap
+
+    from bsfjax._eigensolver import _mapped_empty, _release_after
+    n, m, k = 1000, 12, 5
+    Q, buf = _mapped_empty(n, m)
+    assert Q.shape == (n, m) and Q.flags.f_contiguous and Q.flags.writeable
+    Q[:] = np.arange(1.0, m + 1.0)
+    _release_after(buf, Q[:, :k].nbytes)
+    np.testing.assert_array_equal(Q[:, :k], np.broadcast_to(np.arange(1.0, k + 1.0), (n, k)))
+    if hasattr(buf, "madvise") and hasattr(mmap, "MADV_DONTNEED"):
+        start = -(-Q[:, :k].nbytes // mmap.PAGESIZE) * mmap.PAGESIZE // 8
+        flat = Q.reshape(-1, order="F")
+        assert np.all(flat[start:] == 0.0) and np.all(flat[:n * k] > 0)
+
+
 def test_errors_are_clear():
     W, a = interval_operators(800)
     with pytest.raises(BSFError, match="did not converge"):
