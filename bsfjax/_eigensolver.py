@@ -36,12 +36,13 @@ three runs (``docs/benchmarks.md``).  Tried and dropped: a float32 copy of ``Q``
 reorthogonalization (``T`` amplifies its errors; no convergence), larger blocks (more solves,
 no cheaper per vector past ~16), shifts closer to the spectrum (no change), CHOLMOD calls of
 four columns each (level in the loop), a supernodal factor (cvxopt's CHOLMOD: a 2 s factor at
-445K against 6–8 s, but its solve runs one column at a time, 3–4× slower per vector) with a hand-written triangular solve on it (numba; slower than
-CHOLMOD's simplicial solve); a helper process with its own factor solving half of each block
-(two processes scale in isolation, 19 ms per vector each, but not inside the solver, where
-OpenBLAS's spinning idle thread takes the second core: no gain); the Gram–Schmidt products
-split by rows over Python threads with a one-thread BLAS (scipy's BLAS wrappers keep the GIL,
-and numpy's strided products are slower: orthogonalization 5.9 → 8.0 s at 445K).
+445K against 6–8 s, but its solve runs one column at a time, 3–4× slower per vector) with a
+hand-written triangular solve on it (numba; slower than CHOLMOD's simplicial solve); a helper
+process with its own factor solving half of each block (two processes scale in isolation,
+19 ms per vector each, but not inside the solver, where OpenBLAS's spinning idle thread takes
+the second core: no gain); the Gram–Schmidt products split by rows over Python threads with a
+one-thread BLAS (scipy's BLAS wrappers keep the GIL, and numpy's strided products are slower:
+orthogonalization 5.9 → 8.0 s at 445K).
 
 Projected matrix and restart.  Every time ``T`` is applied to a block ``X`` of the basis, the
 Gram–Schmidt coefficients ``C = Qᵀ T X`` and the triangular factor ``R`` of the remainder
@@ -123,7 +124,7 @@ def _missed_eigenvalues(T, W, d, Y, YKY, lam, b, rng, steps: int = 2) -> int:
     P -= Y @ (Y.T @ P)
     P -= Y @ (Y.T @ P)
     P = np.linalg.qr(P)[0]
-    KP = (W @ (P / d[:, None])) / d[:, None]
+    KP = _apply_K(W, d, P)
     # [Y, P] is orthonormal (Y: Ritz vectors of an orthonormal basis; P ⟂ Y twice), so the
     # projected pencil is standard; its blocks from the products already at hand
     YKP = Y.T @ KP
@@ -266,6 +267,14 @@ def _release_after(buf: mmap.mmap, nbytes: int) -> None:
         buf.madvise(mmap.MADV_DONTNEED, start, len(buf) - start)
 
 
+def _apply_K(W: sp.csr_matrix, d: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``K X = D⁻¹ W D⁻¹ X`` for a block ``X`` of any layout (rows made contiguous for the
+    sparse product)."""
+    KX = W @ np.divide(X, d[:, None], order="C")
+    KX /= d[:, None]
+    return KX
+
+
 def _residual_norms(W: sp.csr_matrix, d: np.ndarray, Y: np.ndarray, lam: np.ndarray):
     """``‖K y_i − λ_i y_i‖`` for the columns of ``Y`` (``K = D⁻¹ W D⁻¹``), a few columns at a
     time: temporaries of ≤ 16 MB, which the allocator reuses, instead of ``n × k`` ones (each
@@ -276,8 +285,7 @@ def _residual_norms(W: sp.csr_matrix, d: np.ndarray, Y: np.ndarray, lam: np.ndar
     res = np.empty(k)
     for j in range(0, k, chunk):
         Yj = Y[:, j:j + chunk]
-        R = W @ np.divide(Yj, d[:, None], order="C")
-        R /= d[:, None]
+        R = _apply_K(W, d, Yj)
         R -= Yj * lam[j:j + chunk]
         res[j:j + chunk] = np.sqrt(np.einsum("ij,ij->j", R, R))
     return res
@@ -413,8 +421,8 @@ def block_lanczos(W: sp.csr_matrix, a: np.ndarray, k: int, sigma: float, *,
     def estimates(theta, S):
         # exact residuals of the Ritz pairs from the Krylov relation: T y − θ y = Q_new g with
         # g = H[new, :] s, and K y − λ y = −(K − σ) Q_new g / θ (one product with W)
-        Qnew = np.ascontiguousarray(Q[:, n_exp:n_cols])  # rows contiguous for W @
-        KQ = (W @ (Qnew / d[:, None])) / d[:, None] - sigma * Qnew
+        Qnew = Q[:, n_exp:n_cols]
+        KQ = _apply_K(W, d, Qnew) - sigma * Qnew
         G = H[n_exp:n_cols, :n_exp] @ S[:, :k]
         r2 = np.einsum("ij,ij->j", G, (KQ.T @ KQ) @ G)
         return np.sqrt(np.maximum(r2, 0.0)) / np.abs(theta[:k]), KQ, G
