@@ -314,6 +314,57 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, name: str | None = None,
     return mesh
 
 
+_BLANK = np.zeros(256, bool)
+_BLANK[[9, 10, 13, 32]] = True
+_ODD = np.zeros(256, bool)  # bytes that would make the fast reader's lines differ from splitlines'
+_ODD[[0, 11, 12, 28, 29, 30, 31, 35]] = True  # NUL, VT, FF, FS…US, '#'
+_ODD[128:] = True
+
+
+def _read_plain_off(raw: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+    """The common OFF layout — a line ``OFF``, a line of three counts, ``nv`` lines of three
+    coordinates, ``nf`` lines ``3 i j k``, no comments — parsed by numpy in one pass (10× the
+    line-by-line reader on FAUST); ``None`` for anything else, which the strict reader then
+    handles (and words its errors).  The layout is checked token by token per line first, so
+    a file this path accepts gives exactly the strict reader's arrays."""
+    b = np.frombuffer(raw, np.uint8)
+    if b.size == 0 or _ODD[b].any():
+        return None
+    cr = np.flatnonzero(b == 13)
+    if cr.size and (cr[-1] + 1 >= b.size or np.any(b[cr + 1] != 10)):
+        return None  # a lone CR is a line break for splitlines: leave it to the strict reader
+    blank = _BLANK[b]
+    start = ~blank
+    start[1:] &= blank[:-1]
+    per_line = np.bincount(np.cumsum(b == 10)[start])
+    per_line = per_line[per_line > 0]
+    if per_line.size < 2 or per_line[0] != 1 or per_line[1] != 3:
+        return None
+    head = raw.split(None, 4)
+    if head[0] != b"OFF":
+        return None
+    try:
+        nv, nf = int(head[1]), int(head[2])
+    except ValueError:
+        return None
+    if (nv <= 0 or nf < 0 or per_line.size != 2 + nv + nf or np.any(per_line[2:2 + nv] != 3)
+            or np.any(per_line[2 + nv:] != 4)):
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a token numpy cannot read: the count below says so
+        try:
+            values = np.fromstring(head[4], dtype=np.float64, sep=" ")
+        except ValueError:
+            return None
+    if values.size != 3 * nv + 4 * nf:
+        return None
+    faces = values[3 * nv:].reshape(nf, 4)
+    if np.any(faces[:, 0] != 3) or np.any(faces != np.round(faces)) \
+            or np.any(np.abs(faces) >= 2.0 ** 53):
+        return None
+    return values[:3 * nv].reshape(nv, 3), faces[:, 1:].astype(np.int64)
+
+
 def _read_off(p: Path) -> tuple[np.ndarray, np.ndarray]:
     """Read an ASCII OFF file (OFF/COFF/NOFF headers, polygons of any size, '#' comments).
 
@@ -322,6 +373,9 @@ def _read_off(p: Path) -> tuple[np.ndarray, np.ndarray]:
     are checked against the file before anything is allocated.
     """
     raw = p.read_bytes()
+    fast = _read_plain_off(raw)
+    if fast is not None:
+        return fast
     try:
         text = raw.decode("ascii")
     except UnicodeDecodeError as exc:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import warnings
 
 import numpy as np
@@ -114,6 +115,63 @@ def test_bad_files_raise_mesh_error(tmp_path, name, text, match):
         load_mesh(p)
     assert str(p) in str(info.value)  # the message names the file
     assert isinstance(info.value, ValueError)
+
+
+def _strict_off(path):
+    """The line-by-line reader alone (the fast path switched off)."""
+    from unittest import mock
+
+    from bsfjax import _mesh
+
+    with mock.patch.object(_mesh, "_read_plain_off", lambda raw: None):
+        return _mesh._read_off(path)
+
+
+def _plain_off(v, f, newline="\n", fmt=repr):
+    rows = ["OFF", f"{len(v)} {len(f)} 0"] + [" ".join(fmt(float(x)) for x in r) for r in v]
+    return newline.join(rows + [f"3 {a} {b} {c}" for a, b, c in f]) + newline
+
+
+@pytest.mark.parametrize("newline,fmt", [("\n", repr), ("\r\n", lambda x: f"{x:.6e}"),
+                                         ("\n", lambda x: f"  {x:g}\t")])
+def test_plain_off_fast_path_equals_strict_reader(tmp_path, newline, fmt):
+    from bsfjax._mesh import _read_off, _read_plain_off
+
+    v, f = icosphere(2)
+    v = v * np.random.default_rng(0).uniform(0.5, 2.0, v.shape)  # digits in every coordinate
+    p = tmp_path / "plain.off"
+    p.write_bytes(_plain_off(v, f, newline, fmt).encode())
+    assert _read_plain_off(p.read_bytes()) is not None  # the fast path took it
+    fast, strict = _read_off(p), _strict_off(p)
+    assert fast[1].dtype == strict[1].dtype == np.int64
+    np.testing.assert_array_equal(fast[0], strict[0])
+    np.testing.assert_array_equal(fast[1], strict[1])
+
+
+@pytest.mark.parametrize("edit", [
+    lambda t: t.replace("OFF\n", "OFF # comment\n", 1),
+    lambda t: t.replace("OFF\n4 4 0\n", "OFF 4 4 0\n", 1),
+    lambda t: t.replace("OFF", "COFF", 1),
+    lambda t: t.replace("\n", "\r"),
+    lambda t: t.replace("3 1 2 3", "4 1 2 3 0"),
+    lambda t: t.replace("0 0 0\n1 0 0\n", "0 0 0 1\n0 0\n", 1),  # 3 + 3 tokens, wrong rows
+    lambda t: t.replace("3 0 2 1", "3 0 2 1.5"),
+])
+def test_other_off_layouts_take_the_strict_reader(tmp_path, edit):
+    from bsfjax._mesh import _read_plain_off
+
+    text = edit(TET)
+    assert _read_plain_off(text.encode()) is None
+    p = _write(tmp_path, "odd.off", text)
+    try:
+        expected = _strict_off(p)
+    except MeshError as exc:
+        with pytest.raises(MeshError, match=re.escape(str(exc).split(": ", 1)[1][:30])):
+            load_mesh(p)
+    else:
+        got = load_mesh(p)  # every layout here keeps all its vertices
+        np.testing.assert_array_equal(got.vertices, expected[0])
+        np.testing.assert_array_equal(got.faces, expected[1])
 
 
 def test_missing_file_and_directory(tmp_path):
