@@ -56,6 +56,31 @@ def test_merged_buckets_give_the_unpadded_results():
         np.testing.assert_array_equal(runs[0][i].labels, runs[1][i].labels)
 
 
+def test_each_target_file_is_read_once(tmp_path, monkeypatch):
+    """The size scan's meshes serve the run: one read per target file, the same results as
+    targets given as meshes."""
+    from bsfjax import _collection
+
+    small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
+    paths = [tmp_path / "a.off", tmp_path / "b.off"]
+    for path, mesh in zip(paths, (small.target, large.target)):
+        bsfjax.save_mesh(path, mesh)
+    reads = []
+
+    def counting(path):
+        reads.append(str(path))
+        return bsfjax.load_mesh(path)
+
+    monkeypatch.setattr(_collection, "load_mesh", counting)
+    kw = dict(method="p2p", k=10, zoomout_samples=300)
+    from_files = dict(transfer_collection(small.source, small.labels, paths, **kw))
+    assert sorted(reads) == sorted(map(str, paths))
+    from_meshes = dict(transfer_collection(small.source, small.labels,
+                                           [bsfjax.load_mesh(q) for q in paths], **kw))
+    for i in range(2):
+        np.testing.assert_array_equal(from_files[i].labels, from_meshes[i].labels)
+
+
 @pytest.fixture(scope="module")
 def collection():
     """Source: the example source (506 V); targets: the example target at two resolutions
