@@ -36,7 +36,7 @@ import scipy.spatial
 
 import bsfjax as bj
 from bsfjax.experiments._datasets import load_dataset
-from bsfjax.experiments.segmentation import (N_LANDMARKS, gt_inverse, label_metrics,
+from bsfjax.experiments.segmentation import (N_LANDMARKS, _maps, gt_inverse, label_metrics,
                                              load_segmentation, shape_labels)
 
 FAUST_PAIRS = [("000", "001"), ("010", "012"), ("020", "022"), ("000", "010"), ("001", "021"),
@@ -56,8 +56,8 @@ def similarity_fit(X: np.ndarray, Y: np.ndarray):
 
 
 def geometric(data: Path, ds, index: int, sample_id: np.ndarray, template: np.ndarray):
-    """A remeshed shape's registration, its template vertex per 5K vertex, and the fit's
-    mean residual (units of the registration)."""
+    """A remeshed shape's registration, its 5K vertices fitted onto it, the template vertex
+    nearest each of them, and the fit's mean residual (units of the registration)."""
     e = ds.shapes[index]
     reg = bj.load_mesh(data / "faust" / f"{e.name}.off")
     fit = similarity_fit(e.mesh.vertices[e.vts], reg.vertices[sample_id])
@@ -66,15 +66,6 @@ def geometric(data: Path, ds, index: int, sample_id: np.ndarray, template: np.nd
     aligned = fit(e.mesh.vertices)
     nearest = scipy.spatial.cKDTree(reg.vertices).query(aligned)[1]
     return reg, aligned, nearest, residual
-
-
-def default_map(ds, i, j, sm, sn, seed: int = 0):
-    src, tgt = ds.shapes[i], ds.shapes[j]
-    gt = ds.ground_truth(i, j)
-    lm = np.asarray(bj.farthest_point_sampling(src.mesh, N_LANDMARKS, seed=seed))
-    return bj.estimate_map(sm.truncate(60), sn.truncate(60), k=30,
-                           landmarks=(lm, gt_inverse(gt, lm, tgt.mesh, src.mesh)), refine_to=60,
-                           source_mesh=src.mesh, target_mesh=tgt.mesh)
 
 
 def remeshed(data: Path, template: np.ndarray, cache: str) -> list[str]:
@@ -94,13 +85,16 @@ def remeshed(data: Path, template: np.ndarray, cache: str) -> list[str]:
         # target vertex -> template vertex -> that vertex on the source registration -> the
         # nearest source 5K vertex (both registrations share the template's vertex order)
         exact = scipy.spatial.cKDTree(pos_m).query(reg_m.vertices[near_n])[1]
-        est = default_map(ds, i, j, sm, sn)
+        lm = np.asarray(bj.farthest_point_sampling(ds.shapes[i].mesh, N_LANDMARKS, seed=0))
+        gt = ds.ground_truth(i, j)
+        # the benchmark's default map, as bench_segmentation.py estimates it
+        C, p2p = _maps(sm, sn, gt, 30, (lm, gt_inverse(gt, lm, tgt, ds.shapes[i].mesh)),
+                       (ds.shapes[i].mesh, tgt))["default"]
         cells = []
         for lab_m, lab_n in truth.values():
             acc = [label_metrics(pred, lab_n, mass, tgt)["accuracy"] for pred in (
-                lab_m[ds.ground_truth(i, j)], lab_m[exact], lab_m[np.asarray(est.p2p)],
-                bj.transfer_labels(sm, sn, lab_m, C=est.C, p2p=est.p2p, mesh=ds.shapes[i].mesh)
-                .labels)]
+                lab_m[gt], lab_m[exact], lab_m[np.asarray(p2p)],
+                bj.transfer_labels(sm, sn, lab_m, C=C, p2p=p2p, mesh=ds.shapes[i].mesh).labels)]
             cells.append(acc)
         agree = 100 * float(mass[truth["sampleID"][1] == truth["geometric"][1]].sum()
                             / mass.sum())

@@ -263,7 +263,7 @@ def _merged_sizes(targets: list, lm_of, n_source: int,
         except (BSFError, ValueError, OSError):
             continue
         size = mesh.vertices.nbytes + mesh.faces.nbytes
-        if keep is not None and kept + size <= _KEEP_BYTES:
+        if keep is not None and mesh is not target and kept + size <= _KEEP_BYTES:
             keep[i] = mesh
             kept += size
         seen[i] = (0 if lm is None else len(lm[0]), size_bucket(mesh.n_vertices),
@@ -411,7 +411,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     def prepare(i, target) -> _Target:
         t = time.perf_counter()
-        mesh = read.pop(i, None) or _as_mesh(target)
+        mesh = read.pop(i) if i in read else _as_mesh(target)
         if mesh.n_vertices <= k_spec:
             raise BSFError(f"{mesh.name or f'target {i}'}: {mesh.n_vertices} vertices, too few "
                            f"for {k_spec} eigenpairs")

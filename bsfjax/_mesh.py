@@ -323,7 +323,7 @@ _ODD[128:] = True
 
 def _read_plain_off(raw: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     """The common OFF layout — a line ``OFF``, a line of three counts, ``nv`` lines of three
-    coordinates, ``nf`` lines ``3 i j k``, no comments — parsed by numpy in one pass (10× the
+    coordinates, ``nf`` lines ``3 i j k``, no comments — parsed by numpy in one pass (2–6× the
     line-by-line reader on FAUST); ``None`` for anything else, which the strict reader then
     handles (and words its errors).  The layout is checked token by token per line first, so
     a file this path accepts gives exactly the strict reader's arrays."""
