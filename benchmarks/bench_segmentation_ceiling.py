@@ -55,7 +55,7 @@ def similarity_fit(X: np.ndarray, Y: np.ndarray):
     return lambda Z: s * (Z - mx) @ R + my
 
 
-def geometric(data: Path, ds, index: int, sample_id: np.ndarray, template: np.ndarray):
+def geometric(data: Path, ds, index: int, sample_id: np.ndarray):
     """A remeshed shape's registration, its 5K vertices fitted onto it, the template vertex
     nearest each of them, and the fit's mean residual (units of the registration)."""
     e = ds.shapes[index]
@@ -78,8 +78,8 @@ def remeshed(data: Path, template: np.ndarray, cache: str) -> list[str]:
         i, j = index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]
         sm, sn = (bj.spectrum(ds.shapes[t].mesh, 100, cache_dir=cache) for t in (i, j))
         mass, tgt = np.asarray(sn.mass), ds.shapes[j].mesh
-        reg_m, pos_m, near_m, res_m = geometric(data, ds, i, sample_id, template)
-        reg_n, _, near_n, res_n = geometric(data, ds, j, sample_id, template)
+        reg_m, pos_m, near_m, res_m = geometric(data, ds, i, sample_id)
+        reg_n, _, near_n, res_n = geometric(data, ds, j, sample_id)
         truth = {"sampleID": (shape_labels(ds, i, template), shape_labels(ds, j, template)),
                  "geometric": (template[near_m], template[near_n])}
         # target vertex -> template vertex -> that vertex on the source registration -> the
@@ -112,15 +112,15 @@ def spectral_ceiling(data: Path, template: np.ndarray, cache: str) -> list[str]:
     for a, b in FAUST_PAIRS:
         i, j = index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]
         sm, sn = (bj.spectrum(ds.shapes[t].mesh, max(KS), cache_dir=cache) for t in (i, j))
-        phi_m, phi_n, mass = np.asarray(sm.evecs), np.asarray(sn.evecs), np.asarray(sn.mass)
+        mass = np.asarray(sn.mass)
         gt, lab_m = ds.ground_truth(i, j), shape_labels(ds, i, template)
         lab_n = shape_labels(ds, j, template)
         rows = {"default": [], "adjoint": []}
         for k in KS:
-            C = phi_n[:, :k].T @ (mass[:, None] * phi_m[gt, :k])
-            for name, (ref, qry) in {"default": (phi_m[:, :k] @ C.T, phi_n[:, :k]),
-                                     "adjoint": (phi_m[:, :k], phi_n[:, :k] @ C)}.items():
-                p2p = scipy.spatial.cKDTree(ref).query(qry, workers=-1)[1]
+            sm_k, sn_k = sm.truncate(k), sn.truncate(k)
+            C = bj.fmap_from_p2p(sm_k, sn_k, gt)
+            for name in rows:
+                p2p = np.asarray(bj.fmap_to_p2p(C, sm_k, sn_k, adjoint=name == "adjoint"))
                 rows[name].append(label_metrics(lab_m[p2p], lab_n, mass,
                                                 ds.shapes[j].mesh)["accuracy"])
         for name, row in rows.items():
