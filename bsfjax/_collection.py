@@ -242,8 +242,8 @@ def _geometry_arrays(mesh: Mesh, m_b: int) -> dict:
             "third_area": _pad_rows(g.third_area, m_b)}
 
 
-def _merged_sizes(targets: list, lm_of, n_source: int,
-                  keep: dict[int, Mesh] | None = None) -> dict[int, tuple[int, int]]:
+def _merged_sizes(targets: list, lm_of, n_source: int, keep: dict[int, Mesh] | None = None,
+                  mine: Iterable[int] = ()) -> dict[int, tuple[int, int]]:
     """The padded (vertex, face) counts of each target of a small collection after
     :func:`merge_buckets` (within each landmark count): its targets are read once ahead for
     their sizes.  Empty for more than :data:`_SCAN_LIMIT` targets (each bucket then holds
@@ -251,11 +251,13 @@ def _merged_sizes(targets: list, lm_of, n_source: int,
     landmarks are invalid, is skipped here; the run reports it.  Every process scans the
     whole collection: a target's padding (and so its result, to the last bit of a float
     reduction) must not depend on how the processes share it.  ``keep``: filled with the meshes
-    read here, up to :data:`_KEEP_BYTES` of them, so that the run does not read them again."""
+    of this process's targets (``mine``) read here from files, up to :data:`_KEEP_BYTES` of
+    them, so that the run does not read them again."""
     if len(targets) > _SCAN_LIMIT:
         return {}
     seen = {}
     kept = 0
+    mine = set(mine)
     for i, target in enumerate(targets):
         try:
             mesh = _as_mesh(target)
@@ -263,7 +265,7 @@ def _merged_sizes(targets: list, lm_of, n_source: int,
         except (BSFError, ValueError, OSError):
             continue
         size = mesh.vertices.nbytes + mesh.faces.nbytes
-        if keep is not None and mesh is not target and kept + size <= _KEEP_BYTES:
+        if keep is not None and i in mine and mesh is not target and kept + size <= _KEEP_BYTES:
             keep[i] = mesh
             kept += size
         seen[i] = (0 if lm is None else len(lm[0]), size_bucket(mesh.n_vertices),
@@ -462,13 +464,14 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 seconds=tg.seconds + share)
 
     targets = list(targets)
-    read: dict[int, Mesh] = {}  # targets the scan has read, handed to prepare
-    merged = _merged_sizes(targets, lm_of, n_m, read) if pad else {}
+    share = process_share(range(len(targets)))
+    read: dict[int, Mesh] = {}  # targets of this process the scan has read, handed to prepare
+    merged = _merged_sizes(targets, lm_of, n_m, read, share) if pad else {}
     in_flight = None  # the group dispatched last, collected after the next one is prepared
     # on accelerators the next target's eigensolve (host) overlaps the dispatched kernel; on a
     # CPU backend both would share the same cores (measured slower), so they alternate
     overlap = jax.default_backend() != "cpu"
-    for i in process_share(range(len(targets))):
+    for i in share:
         try:
             tg = prepare(i, targets[i])
         except (BSFError, ValueError, OSError) as exc:
