@@ -6,7 +6,7 @@ methods through the default estimated map, and the fast ones also through the cr
 the ground-truth maps; then times the default transfer (``transfer_labels``, method
 ``"refined"``) after the map on one FAUST pair: median of ``--repeats`` warm calls.
 
-    python benchmarks/bench_segmentation.py --out /tmp/seg [--data ../shared/data]
+    python benchmarks/bench_segmentation.py --out /tmp/seg [--data ../shared/data] [--quick | --quick-maps]
 
 Writes ``segmentation_bench.csv`` and ``segmentation_bench.md`` into ``--out``.
 """
@@ -41,6 +41,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default=str(Path.home() / ".cache" / "bsfjax-spectra"))
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="only p2p and refined, default map")
+    ap.add_argument("--quick-maps", action="store_true",
+                    help="only p2p and refined, through all three maps")
     args = ap.parse_args(argv)
     data = Path(args.data)
     seg = data / "segmentations" / "smpl_vert_segmentation.json"
@@ -52,6 +54,7 @@ def main(argv=None) -> int:
         index = {e.name: i for i, e in enumerate(ds.shapes)}
         ids = [(index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]) for a, b in pairs]
         runs = ([(("p2p", "refined"), ("default",))] if args.quick else
+                [(("p2p", "refined"), ("default", "crude", "truth"))] if args.quick_maps else
                 [(tuple(METHODS), ("default",)), (FAST, ("crude", "truth"))])
         for methods, maps in runs:
             t0 = time.perf_counter()
@@ -73,11 +76,17 @@ def main(argv=None) -> int:
     est = bj.estimate_map(sm.truncate(60), sn.truncate(60), k=30, landmarks=(lm, lm),
                           refine_to=60, source_mesh=src.mesh, target_mesh=tgt.mesh)
     lab = shape_labels(ds, 0, template)
-    times = []
-    for _ in range(args.repeats + 1):
-        t0 = time.perf_counter()
-        bj.transfer_labels(sm, sn, lab, C=est.C, p2p=est.p2p)
-        times.append(time.perf_counter() - t0)
+    # peers in the same run: the pull-back, and stop 27's default (the vote of the last three
+    # maps of a continuation on every vertex)
+    runs = {"refined": dict(samples=est.samples), "p2p": dict(method="p2p"),
+            "refined, 3 maps on every vertex": dict(method=bj.RefinedPullBack(n_vote=3))}
+    timed = {}
+    for name, kw in runs.items():
+        times = timed[name] = []
+        for _ in range(args.repeats + 1):
+            t0 = time.perf_counter()
+            bj.transfer_labels(sm, sn, lab, C=est.C, p2p=est.p2p, **kw)
+            times.append(time.perf_counter() - t0)
     rep = report(rows, (30,))
     if rep.figure is not None:
         rep.figure(out / "segmentation_bench.png")
@@ -86,10 +95,16 @@ def main(argv=None) -> int:
             del r[k]
     write_csv(rows, out / "segmentation_bench.csv")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    timing = (f"Default transfer after the map (transfer_labels, 'refined', 24 parts, FAUST "
-              f"000→010, 6890 vertices): first call {times[0]:.2f} s (compilation), median of "
-              f"{args.repeats} warm calls {np.median(times[1:]):.3f} s; {os.cpu_count()} CPUs, "
-              f"load average {load:.1f}, {platform.machine()}.")
+    med = {name: float(np.median(t[1:])) for name, t in timed.items()}
+    timing = (f"Default transfer after the map (transfer_labels, 'refined' on the map's 2000 "
+              f"samples, 24 parts, FAUST 000→010, 6890 vertices): first call "
+              f"{timed['refined'][0]:.2f} s (compiled earlier in the run if a pair had these "
+              f"sizes), median of {args.repeats} warm calls "
+              f"{med['refined']:.3f} s; in the same run " + ", ".join(
+                  f"{name} {m:.3f} s" for name, m in med.items() if name != "refined") +
+              f" ({med['refined, 3 maps on every vertex'] / med['refined']:.2f}× faster than "
+              f"the vote on every vertex); {os.cpu_count()} CPUs, load average {load:.1f}, "
+              f"{platform.machine()}.")
     (out / "segmentation_bench.md").write_text(rep.markdown + "\n\n" + timing + "\n")
     print(timing)
     return 0

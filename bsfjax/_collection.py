@@ -204,9 +204,13 @@ def _transfer_stage(rep, it, pb, C_ref, *, cfg: _Config):
     method = cfg.method
     full = getattr(method, "full_spectra", False)
     two_k = isinstance(method, SpectralProjection) and method.factor == 2
+    samples = None
+    if cfg.zoomout_chunk is not None:  # "refined" continues on ZoomOut's samples
+        samples = (Subsample(rep["zo_indices"], rep["zo_cells"]),
+                   Subsample(it["zo_indices"], it["zo_cells"]))
     pair = Pair(source=src if full or two_k else src.truncate(k),
                 target=tgt if full else tgt.truncate(k), C=C, p2p=p2p,
-                centers=rep.get("centers"), distances=rep.get("distances"))
+                centers=rep.get("centers"), distances=rep.get("distances"), samples=samples)
     F = rep["F"].astype(dt)
     _, carry, _ = method.prepare(pair, F, k)
     return {"values": carry(C), "p2p": p2p, "C": C, "energy": energy}
@@ -407,6 +411,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         check_int(zoomout_samples, "zoomout_samples", 1)
         sub_m = subsample(source, zoomout_samples)
         rep["zo_indices"] = sub_m.indices
+        rep["zo_cells"] = sub_m.cells
         zo_chunk = _default_chunk(sub_m.indices.size)
     lm_of = _landmark_lookup(landmarks)
     pending: dict[tuple, list[_Target]] = {}

@@ -123,13 +123,15 @@ def run_demo(out_dir: str | Path | None = "bsfjax-demo", *, levels: int = 3, k: 
     outputs = {}
     for map_name, C, p2p in (("ground truth", C_gt, gt), ("estimated", est.C, est.p2p)):
         inp = Pair(source=sm.truncate(k), target=sn.truncate(k), C=C, centers=centers, p2p=p2p)
-        full = Pair(source=sm, target=sn, C=C, p2p=p2p)  # 'refined' uses the whole spectra
+        # 'refined' uses the whole spectra, and the samples of the estimate's ZoomOut
+        full = Pair(source=sm, target=sn, C=C, p2p=p2p, samples=est.samples)
         for method in ("p2p", "refined", "std", "omp"):
             res = timer(f"{method} on {n_functions} functions, {map_name} map", transfer,
                         method, full if method == "refined" else inp, F, k=k)
             seg = transfer_labels(sm if method == "refined" else sm.truncate(k),
                                   sn if method == "refined" else sn.truncate(k), pair.labels,
-                                  method=method, C=C, p2p=p2p, centers=centers)
+                                  method=method, C=C, p2p=p2p, centers=centers,
+                                  samples=est.samples)
             e_app = (None if res.approximation is None
                      else float(np.mean(relative_error(F, res.approximation, sm.mass))))
             e_tr = np.asarray(relative_error(F[:, gt], res.transferred, sn.mass))  # f∘T on N

@@ -33,6 +33,9 @@ class MapEstimate(NamedTuple):
     C: np.ndarray  #: ``(k, k)`` functional map source → target
     p2p: np.ndarray  #: ``(n_N,)`` point map, target vertex → source vertex
     C_initial: np.ndarray  #: the descriptor-based map before ZoomOut
+    #: ``(source, target)`` :class:`~bsfjax.Subsample` s ZoomOut ran on (``None``: every
+    #: vertex); ``"refined"`` continues on them (``transfer_labels(..., samples=)``)
+    samples: tuple | None = None
 
 
 def _check_landmarks(landmarks, n_m: int, n_n: int):
@@ -109,7 +112,7 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     C = np.asarray(fmap_from_p2p(source.truncate(k), target.truncate(k), p2p))
     back = lambda X: np.asarray(map_to_unit_area(np.asarray(X), am, an, inverse=True),  # noqa: E731
                                 np.asarray(X).dtype)
-    return MapEstimate(C=back(C), p2p=p2p, C_initial=back(C0))
+    return MapEstimate(C=back(C), p2p=p2p, C_initial=back(C0), samples=samples)
 
 
 def transfer_values(source: Spectrum, target: Spectrum,
@@ -118,7 +121,7 @@ def transfer_values(source: Spectrum, target: Spectrum,
                     C: Float[ArrayLike, "k_N k"] | None = None,
                     p2p: Int[ArrayLike, " n_N"] | None = None, k: int | None = None,
                     centers: Int[ArrayLike, " n_c"] | None = None, n_bsf: float | int = 0.05,
-                    seed: int = 0, mesh=None, **options) -> np.ndarray:
+                    seed: int = 0, mesh=None, samples=None, **options) -> np.ndarray:
     """Transfer functions ``values`` ``(m, n_M)`` (or ``(n_M,)``) from source to target.
 
     The mesh-level entry point of :func:`bsfjax.transfer`: it samples the frame centres and
@@ -137,6 +140,8 @@ def transfer_values(source: Spectrum, target: Spectrum,
       farthest point sampling (``seed``) on ``mesh`` — the source :class:`~bsfjax.Mesh` — or
       on the spectral embedding when no mesh is given.  With the same centres this equals
       ``decode(transfer_frame(build_frame(source, centers), C, target), encode(...))``.
+    - ``samples``: ``(source, target)`` :class:`~bsfjax.Subsample` s for ``"refined"`` (e.g.
+      ``estimate_map(...).samples``); ignored by the other methods.
     """
     method = as_method(method, **options)
     f = np.asarray(values, dtype=float)
@@ -181,7 +186,8 @@ def transfer_values(source: Spectrum, target: Spectrum,
                 target=target if full else target.truncate(kn), C=C,
                 centers=None if centers is None
                 else np.asarray(centers), p2p=p2p,
-                distances=distances)
+                distances=distances,
+                samples=samples if isinstance(method, RefinedPullBack) else None)
     res = transfer(method, pair, f, k=k)
     out = np.asarray(res.transferred)
     return out[0] if single else out
@@ -242,7 +248,7 @@ def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, "
     if lab.shape != (source.n_vertices,):
         raise BSFError(f"labels must have one entry per source vertex ({source.n_vertices}), got "
                        f"shape {lab.shape}")
-    inputs = {"C", "p2p", "k", "centers", "n_bsf", "seed", "mesh"}  # the rest: method options
+    inputs = {"C", "p2p", "k", "centers", "n_bsf", "seed", "mesh", "samples"}  # the rest: method options
     method = as_method(method, **{k: v for k, v in kwargs.items() if k not in inputs})
     kwargs = {k: v for k, v in kwargs.items() if k in inputs}
     refined = isinstance(method, RefinedPullBack)

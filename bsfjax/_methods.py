@@ -50,7 +50,7 @@ from ._sparse_frame import SparseFrame
 from ._lstsq import LeastSquares
 from ._omp import OMP
 from ._spectrum import Spectrum
-from ._fmap import _chunk_for
+from ._fmap import _check_samples, _chunk_for
 from ._refine import check_options as check_refine_options, refine_core, start_point_map
 from ._refine import sizes_for as refine_sizes_for
 from ._validate import check_finite
@@ -80,6 +80,9 @@ class Pair(eqx.Module):
     - ``p2p``: ``(n_N,)`` int point map, target vertex → source vertex.
     - ``centers``: ``(n_c,)`` int BSF centres on ``M`` (``BSF``, ``"geod"``, ``"heat"``).
     - ``distances``: ``(n_c, n_M)`` geodesic distances from the centres (``"geod"``).
+    - ``samples``: ``(source, target)`` :class:`~bsfjax.Subsample` s (``"refined"``: its
+      continuation's early steps run on them; :func:`bsfjax.estimate_map` returns the ones its
+      ZoomOut used).
     """
 
     source: Spectrum
@@ -89,6 +92,7 @@ class Pair(eqx.Module):
     p2p: Int[ArrayLike, "*pairs n_N"] | None = None
     centers: Int[ArrayLike, "*pairs n_c"] | None = None
     distances: Float[ArrayLike, "*pairs n_c n_M"] | None = None
+    samples: tuple | None = None
 
 
 def _shape(x):
@@ -309,26 +313,34 @@ class PullBack(AbstractMethod):
 
 class RefinedPullBack(AbstractMethod):
     r"""``"refined"`` (default of :func:`bsfjax.transfer_labels` and ``bsfjax transfer``): the
-    pull-back through a refined map, averaged over its last point maps.
+    pull-back through a refined map.
 
     The input point map ``pair.p2p`` (or, without one, the point map of ``pair.C``) is refined
     by the descriptor-guided ZoomOut continuation of :mod:`bsfjax._refine` from ``k_start`` to
     ``k_max`` eigenpairs (default: all that both spectra hold) and the functions are pulled
-    back through each of the last ``n_vote`` point maps ``T_t``: ``f̃_N = (1/T) Σ_t f ∘ T_t``.
-    For indicators the arg-max of ``f̃_N`` is the majority vote of the maps.  It uses the whole
+    back through the last ``n_vote`` point maps ``T_t``: ``f̃_N = (1/T) Σ_t f ∘ T_t`` (for
+    indicators the arg-max is the majority vote of the maps, ties to the last).  With
+    ``pair.samples`` the steps before those ``n_vote`` run on the samples (their searches cost
+    ``s_N × s_M``); only the kept maps are computed on every vertex.  It uses the whole
     spectra it is given, not ``k``: give them ``k_max`` eigenpairs (the CLI computes 100).
     A map better than the continuation's fixed point (a registration, a ground truth) is
     better used as is: ``"p2p"``.
 
+    Measured (docs/results.md, SMPL parts on 9 FAUST / FAUST_5k pairs, 2000 samples per
+    shape): the last map alone on samples is as accurate as the vote of the last three maps on
+    every vertex (94.95 against 94.81 % with the CLI's map, 93.74 against 93.54 % with a crude
+    one) for one search over every vertex instead of three.
+
     **Arguments:** ``k_start``, ``k_max``, ``step``, ``n_vote``, ``descriptor_weight``,
     ``descriptor_dims``, ``n_energies`` as in :func:`bsfjax.refine_point_maps` (its
-    ``n_keep`` is ``n_vote``).
+    ``n_keep`` is ``n_vote``).  With ``n_vote = 1`` the scores are 0/1, so the label
+    transfer's ``confidence`` is 1 and its regime never ``"unreliable"``.
     """
 
     k_start: int = eqx.field(static=True, default=60, kw_only=True)
     k_max: int | None = eqx.field(static=True, default=None, kw_only=True)
     step: int = eqx.field(static=True, default=20, kw_only=True)
-    n_vote: int = eqx.field(static=True, default=3, kw_only=True)
+    n_vote: int = eqx.field(static=True, default=1, kw_only=True)
     descriptor_weight: float = eqx.field(static=True, default=0.5, kw_only=True)
     descriptor_dims: int = eqx.field(static=True, default=8, kw_only=True)
     n_energies: int = eqx.field(static=True, default=100, kw_only=True)
@@ -360,16 +372,27 @@ class RefinedPullBack(AbstractMethod):
                 raise BSFError(f"pair.C {_shape(pair.C)} is larger than the spectra")
             check_finite(pair.C, "pair.C")
         self.sizes(np.shape(pair.source.evecs)[-1], np.shape(pair.target.evecs)[-1])
+        if pair.samples is not None:
+            n_m, n_n = np.shape(pair.source.evecs)[-2], np.shape(pair.target.evecs)[-2]
+            if batch:  # a stack: check one pair's samples (equal shapes throughout)
+                _check_samples(jax.tree.map(lambda x: np.asarray(x)[0], pair.samples), n_m, n_n)
+            else:
+                _check_samples(pair.samples, n_m, n_n)
 
     def prepare(self, pair, F, k):
         n_m, n_n = np.shape(pair.source.evecs)[-2], np.shape(pair.target.evecs)[-2]
         chunk = _chunk_for(n_m, n_n, None)
+        sample_chunk = None
+        if pair.samples is not None:
+            s_m, s_n = (np.shape(s.indices)[-1] for s in pair.samples)
+            sample_chunk = _chunk_for(s_m, s_n, None)
         sizes = self.sizes(np.shape(pair.source.evecs)[-1], np.shape(pair.target.evecs)[-1])
         p0 = start_point_map(pair.p2p, pair.C, pair.source, pair.target, chunk)
         maps = refine_core(p0, pair.source, pair.target, sizes=sizes,
                            n_keep=min(self.n_vote, len(sizes)),
                            weight=float(self.descriptor_weight), dims=self.descriptor_dims,
-                           n_energies=self.n_energies, chunk=chunk)
+                           n_energies=self.n_energies, chunk=chunk, samples=pair.samples,
+                           sample_chunk=sample_chunk)
         # later (more refined) maps weigh a little more: a three-way tie goes to the last map
         w = 1.0 + 1e-3 * jnp.arange(maps.shape[0], dtype=F.dtype)
         w = w / jnp.sum(w)

@@ -202,7 +202,7 @@ def _unit_area_pair(method: AbstractMethod, pair: Pair) -> Pair:
         dist = np.asarray(dist, np.float64) / np.sqrt(am)[..., None, None]
     return Pair(source=source, target=target if target is not None else pair.target,
                 C=map_to_unit_area(pair.C, am, an), C2=map_to_unit_area(pair.C2, am, an),
-                p2p=pair.p2p, centers=pair.centers, distances=dist)
+                p2p=pair.p2p, centers=pair.centers, distances=dist, samples=pair.samples)
 
 
 def _rescaled(res: TransferResult, scale) -> TransferResult:

@@ -320,15 +320,23 @@ def _transfer_one(args) -> int:
         C, p2p = est.C, est.p2p
         print(f"estimated a {k}x{k} map (ZoomOut to {k_map})", file=sys.stderr)
     common = dict(C=C, p2p=p2p, method=args.method, mesh=source)
+    if args.method == "refined":  # its continuation runs on the samples of the map's ZoomOut
+        from ._highlevel import ZOOMOUT_SAMPLES
+        from ._sampling import subsample
+
+        common["samples"] = (est.samples if kind == "estimate" else
+                             (subsample(source, ZOOMOUT_SAMPLES), subsample(target, ZOOMOUT_SAMPLES)))
     if args.labels:
         res = transfer_labels(sm, sn, values, threshold=args.threshold, **common)
         result = res.labels.astype(np.int64)
         print(f"transferred {np.unique(values).size} labels with {args.method}; unassigned: "
               f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
         if res.regime is not None:
-            agree = "" if res.agreement is None else f", {res.agreement:.1%} of the area as the " \
-                                                      "input map's pull-back"
-            print(f"regime: {res.regime} (vote confidence {res.confidence:.2f}{agree})",
+            why = [] if res.agreement is None else [f"{res.agreement:.1%} of the area as the "
+                                                    "input map's pull-back"]
+            if res.confidence < 1:  # a vote of several maps (n_vote > 1)
+                why.append(f"vote confidence {res.confidence:.2f}")
+            print(f"regime: {res.regime}" + (f" ({', '.join(why)})" if why else ""),
                   file=sys.stderr)
         if truth is not None:
             area = np.asarray(sn.mass)

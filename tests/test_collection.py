@@ -100,7 +100,7 @@ def collection():
 def test_padded_targets_equal_the_one_pair_path(collection):
     """Each target's result, computed padded to its size bucket, is the one of the unpadded
     one-pair path, estimate_map then transfer_labels (what ``bsfjax transfer --out`` runs):
-    the same point map and labels, bit for bit."""
+    the same point map and labels, bit for bit (``"refined"`` continuing on ZoomOut's samples)."""
     small, targets, lm, padded = collection
     assert all(size_bucket(t.n_vertices) > t.n_vertices for t in targets)  # really padded
     sm = bsfjax.spectrum(small.source, 100)
@@ -110,7 +110,7 @@ def test_padded_targets_equal_the_one_pair_path(collection):
                                   landmarks=lm.get(i), source_mesh=small.source, target_mesh=t,
                                   zoomout_samples=300)
         res = bsfjax.transfer_labels(sm, sn, small.labels, C=est.C, p2p=est.p2p,
-                                     mesh=small.source)
+                                     mesh=small.source, samples=est.samples)
         assert padded[i].labels.shape == padded[i].p2p.shape == (t.n_vertices,)
         np.testing.assert_array_equal(padded[i].p2p, est.p2p)
         np.testing.assert_allclose(padded[i].C, est.C, atol=1e-4)

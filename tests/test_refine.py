@@ -73,8 +73,11 @@ def test_engine_is_the_weighted_vote(pair):
     f = np.random.default_rng(0).random((2, sm.n_vertices))
     w = 1 + 1e-3 * np.arange(3)
     want = np.einsum("t,mtn->mn", w / w.sum(), f[:, maps])
-    got = bj.transfer_values(sm, sn, f, p2p=p0, method="refined", **opts)
+    got = bj.transfer_values(sm, sn, f, p2p=p0, method="refined", n_vote=3, **opts)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    # the default: the pull-back through the last map alone
+    np.testing.assert_allclose(bj.transfer_values(sm, sn, f, p2p=p0, method="refined", **opts),
+                               f[:, maps[-1]], rtol=1e-6)
     # starting from C instead of a point map: the same as from C's nearest-neighbour point map
     C = np.asarray(bj.fmap_from_p2p(sm.truncate(20), sn.truncate(20), p0))
     pC = np.asarray(bj.fmap_to_p2p(C, sm.truncate(20), sn.truncate(20)))
@@ -83,15 +86,73 @@ def test_engine_is_the_weighted_vote(pair):
                                rtol=1e-5, atol=1e-6)
 
 
+def _samples(ex, n):
+    return bj.subsample(ex.source, n), bj.subsample(ex.target, n)
+
+
+def test_samples_covering_every_vertex_are_the_exact_computation(pair):
+    """Each vertex its own sample (unit cells): the quadrature is Φ_Nᵀ A_N Π Φ_M and the
+    searches are over every vertex, so the maps equal those without samples."""
+    ex, sm, sn = pair
+    p0 = _corrupt(sn.n_vertices, 0.2, seed=8)
+    opts = dict(k_start=20, step=10, n_keep=1)
+    every = _samples(ex, 10 ** 6)
+    np.testing.assert_array_equal(np.asarray(bj.refine_point_maps(sm, sn, p0, samples=every,
+                                                                  **opts)),
+                                  np.asarray(bj.refine_point_maps(sm, sn, p0, **opts)))
+
+
+def test_kept_steps_run_on_every_vertex(pair):
+    """Samples only replace the steps whose maps are not kept: with every step kept they
+    change nothing; with one kept, the earlier steps are ZoomOut on the samples."""
+    ex, sm, sn = pair
+    p0 = _corrupt(sn.n_vertices, 0.2, seed=9)
+    S = _samples(ex, 500)
+    opts = dict(k_start=20, step=10, descriptor_weight=0.0)
+    np.testing.assert_array_equal(
+        np.asarray(bj.refine_point_maps(sm, sn, p0, n_keep=3, samples=S, **opts)),
+        np.asarray(bj.refine_point_maps(sm, sn, p0, n_keep=3, **opts)))
+    # w = 0, one map kept: sizes 20 → 30 on the samples (bsfjax.zoomout with samples, a tested
+    # route), then the 40-eigenpair search over every vertex
+    last = np.asarray(bj.refine_point_maps(sm, sn, p0, n_keep=1, samples=S, **opts))[-1]
+    C0 = bj.fmap_from_p2p(sm.truncate(20), sn.truncate(20), p0)
+    C = bj.zoomout(C0, sm, sn, K, step=10, samples=S)
+    np.testing.assert_array_equal(last, np.asarray(bj.fmap_to_p2p(C, sm, sn)))
+
+
+def test_samples_repair_a_corrupted_map(pair):
+    """The sampled continuation keeps the full one's repair (30 % random matches)."""
+    ex, sm, sn = pair
+    p0 = _corrupt(sn.n_vertices, 0.3, seed=1)
+    method = bj.RefinedPullBack(k_start=20, step=10)
+    res = bj.transfer_labels(sm, sn, ex.labels, p2p=p0, method=method, samples=_samples(ex, 500))
+    assert _acc(res.labels, ex.labels, sn.mass) > 0.97
+    assert res.confidence == pytest.approx(1.0)  # one map: 0/1 scores
+
+
+def test_bad_samples(pair):
+    ex, sm, sn = pair
+    p = np.arange(sn.n_vertices)
+    S = _samples(ex, 300)
+    with pytest.raises(bj.BSFError, match="samples"):
+        bj.refine_point_maps(sm, sn, p, samples=S[::-1][:1])
+    bad = (S[0], bj.Subsample(S[1].indices, S[1].cells[:-1]))
+    with pytest.raises(bj.BSFError, match="target samples"):
+        bj.refine_point_maps(sm, sn, p, samples=bad)
+    with pytest.raises(bj.BSFError, match="target samples"):
+        bj.transfer_labels(sm, sn, ex.labels, p2p=p, samples=bad)
+
+
 def test_vmapped_pairs_equal_single(pair):
     ex, sm, sn = pair
     p0, p1 = _corrupt(sn.n_vertices, 0.1, seed=3), _corrupt(sn.n_vertices, 0.2, seed=4)
     f = np.asarray(bj.labels_to_indicators(ex.labels), np.float32)
     method = bj.RefinedPullBack(k_start=20, step=10)
-    pairs = [bj.Pair(source=sm, target=sn, p2p=p) for p in (p0, p1)]
+    S = _samples(ex, 500)
+    pairs = [bj.Pair(source=sm, target=sn, p2p=p, samples=S) for p in (p0, p1)]
     both = bj.transfer_pairs(method, pairs, np.stack([f, f])).transferred
     for i, p in enumerate((p0, p1)):
-        one = bj.transfer(method, bj.Pair(source=sm, target=sn, p2p=p), f).transferred
+        one = bj.transfer(method, bj.Pair(source=sm, target=sn, p2p=p, samples=S), f).transferred
         np.testing.assert_allclose(np.asarray(both[i]), np.asarray(one), atol=1e-6)
 
 

@@ -29,10 +29,10 @@ from tqdm.auto import tqdm
 
 from .._errors import BSFError
 from .._fmap import fmap_from_p2p
-from .._highlevel import estimate_map, transfer_labels
+from .._highlevel import ZOOMOUT_SAMPLES, estimate_map, transfer_labels
 from .._mesh import mesh_edges
 from .._refine import REFINE_EIGENPAIRS
-from .._sampling import farthest_point_sampling
+from .._sampling import farthest_point_sampling, subsample
 from .._spectrum import spectrum
 from ._datasets import Dataset
 from ._io import Report, pivot_markdown
@@ -209,13 +209,15 @@ def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k
         lm_src = np.asarray(farthest_point_sampling(src.mesh, N_LANDMARKS, seed=seed))
         landmarks = (lm_src, gt_inverse(gt, lm_src, tgt.mesh, src.mesh))
         all_maps = _maps(sm, sn, gt, k, landmarks, (src.mesh, tgt.mesh))
+        # "refined" continues on the samples the default map's ZoomOut used, whatever the map
+        samples = (subsample(src.mesh, ZOOMOUT_SAMPLES), subsample(tgt.mesh, ZOOMOUT_SAMPLES))
         for map_name in maps:
             C, p2p = all_maps[map_name]
             for name in methods:
                 t0 = time.perf_counter()
                 method, options = METHODS[name]
                 res = transfer_labels(sm, sn, lab_m, method=method, C=C, p2p=p2p,
-                                      mesh=src.mesh, **options)
+                                      mesh=src.mesh, samples=samples, **options)
                 sec = time.perf_counter() - t0
                 row = {"source": src.name, "target": tgt.name, "kind": _kind(src.name, tgt.name),
                        "map": map_name, "method": name,
