@@ -248,7 +248,8 @@ def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, "
     if lab.shape != (source.n_vertices,):
         raise BSFError(f"labels must have one entry per source vertex ({source.n_vertices}), got "
                        f"shape {lab.shape}")
-    inputs = {"C", "p2p", "k", "centers", "n_bsf", "seed", "mesh", "samples"}  # the rest: method options
+    # the rest: method options
+    inputs = {"C", "p2p", "k", "centers", "n_bsf", "seed", "mesh", "samples"}
     method = as_method(method, **{k: v for k, v in kwargs.items() if k not in inputs})
     kwargs = {k: v for k, v in kwargs.items() if k in inputs}
     refined = isinstance(method, RefinedPullBack)

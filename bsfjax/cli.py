@@ -325,7 +325,8 @@ def _transfer_one(args) -> int:
         from ._sampling import subsample
 
         common["samples"] = (est.samples if kind == "estimate" else
-                             (subsample(source, ZOOMOUT_SAMPLES), subsample(target, ZOOMOUT_SAMPLES)))
+                             (subsample(source, ZOOMOUT_SAMPLES),
+                              subsample(target, ZOOMOUT_SAMPLES)))
     if args.labels:
         res = transfer_labels(sm, sn, values, threshold=args.threshold, **common)
         result = res.labels.astype(np.int64)
