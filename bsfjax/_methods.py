@@ -382,17 +382,12 @@ class RefinedPullBack(AbstractMethod):
     def prepare(self, pair, F, k):
         n_m, n_n = np.shape(pair.source.evecs)[-2], np.shape(pair.target.evecs)[-2]
         chunk = _chunk_for(n_m, n_n, None)
-        sample_chunk = None
-        if pair.samples is not None:
-            s_m, s_n = (np.shape(s.indices)[-1] for s in pair.samples)
-            sample_chunk = _chunk_for(s_m, s_n, None)
         sizes = self.sizes(np.shape(pair.source.evecs)[-1], np.shape(pair.target.evecs)[-1])
         p0 = start_point_map(pair.p2p, pair.C, pair.source, pair.target, chunk)
         maps = refine_core(p0, pair.source, pair.target, sizes=sizes,
                            n_keep=min(self.n_vote, len(sizes)),
                            weight=float(self.descriptor_weight), dims=self.descriptor_dims,
-                           n_energies=self.n_energies, chunk=chunk, samples=pair.samples,
-                           sample_chunk=sample_chunk)
+                           n_energies=self.n_energies, chunk=chunk, samples=pair.samples)
         # later (more refined) maps weigh a little more: a three-way tie goes to the last map
         w = 1.0 + 1e-3 * jnp.arange(maps.shape[0], dtype=F.dtype)
         w = w / jnp.sum(w)

@@ -94,13 +94,13 @@ def _descriptors(spec_m: Spectrum, spec_n: Spectrum, k: int, n_energies: int, di
 
 def refine_core(p2p, spec_m: Spectrum, spec_n: Spectrum, *, sizes: tuple[int, ...],
                 n_keep: int, weight: float, dims: int, n_energies: int, chunk: int,
-                samples=None, sample_chunk: int | None = None):
+                samples=None):
     """The last ``n_keep`` point maps ``(n_keep, n_N)`` of the continuation from ``p2p``
     (traceable: the engine runs it under jit and vmap).  ``sizes`` as
     :func:`refinement_sizes`; the spectra must hold ``sizes[-1]`` eigenpairs.  ``samples``:
     ``None`` or ``(source, target)`` :class:`~bsfjax.Subsample` s; the steps before the last
     ``n_keep`` then run on them (searches ``s_N × s_M``, ``C`` the quadrature over the target's
-    sample cells, as :func:`bsfjax.zoomout` with ``samples``), with ``sample_chunk``."""
+    sample cells, as :func:`bsfjax.zoomout` with ``samples``)."""
     k = sizes[-1]
     dt = jnp.result_type(float)
     phi_m = jnp.asarray(spec_m.evecs[:, :k], dt)
@@ -139,20 +139,18 @@ def refine_core(p2p, spec_m: Spectrum, spec_n: Spectrum, *, sizes: tuple[int, ..
         sub_m, sub_n = samples
         idx_m, idx_n = jnp.asarray(sub_m.indices), jnp.asarray(sub_n.indices)
         C, _ = steps(C, jnp.arange(first_full), phi_m[idx_m], phi_n[idx_n],
-                     sub_n.weights(mass_n), dm[idx_m], dn[idx_n], sample_chunk,
-                     lambda p: idx_m[p])
+                     sub_n.weights(mass_n), dm[idx_m], dn[idx_n],
+                     _chunk_for(idx_m.shape[0], idx_n.shape[0], None), lambda p: idx_m[p])
     _, maps = steps(C, jnp.arange(first_full, len(sizes)), phi_m, phi_n, mass_n, dm, dn, chunk,
                     lambda p: p)
     return maps[n_full - n_keep:]
 
 
 @functools.partial(jax.jit, static_argnames=("sizes", "n_keep", "weight", "dims", "n_energies",
-                                             "chunk", "sample_chunk"))
-def _refine_jit(p2p, spec_m, spec_n, samples, *, sizes, n_keep, weight, dims, n_energies, chunk,
-                sample_chunk):
+                                             "chunk"))
+def _refine_jit(p2p, spec_m, spec_n, samples, *, sizes, n_keep, weight, dims, n_energies, chunk):
     return refine_core(p2p, spec_m, spec_n, sizes=sizes, n_keep=n_keep, weight=weight,
-                       dims=dims, n_energies=n_energies, chunk=chunk, samples=samples,
-                       sample_chunk=sample_chunk)
+                       dims=dims, n_energies=n_energies, chunk=chunk, samples=samples)
 
 
 def start_point_map(pair_p2p, C, spec_m: Spectrum, spec_n: Spectrum, chunk: int):
@@ -221,14 +219,11 @@ def refine_point_maps(source: Spectrum, target: Spectrum, p2p, *, k_start: int =
             raise BSFError(f"{name} must be a bsfjax.Spectrum, got {type(s).__name__}")
     p = _as_index_array(p2p, target.n_vertices, source.n_vertices, "p2p")
     sizes = sizes_for(source.k, target.k, k_start, k_max, step)
-    sample_chunk = None
     if samples is not None:
         samples = _check_samples(samples, source.n_vertices, target.n_vertices)
-        sample_chunk = _chunk_for(samples[0].indices.size, samples[1].indices.size, None)
     # unit magnitudes on the host in float64 before the float32 cast, one factor for both
     source, _, target, _ = unit_area_pair(source, target)
     return _refine_jit(jnp.asarray(p), source, target, samples, sizes=sizes,
                        n_keep=min(n_keep, len(sizes)), weight=float(descriptor_weight),
                        dims=int(descriptor_dims), n_energies=int(n_energies),
-                       chunk=_chunk_for(source.n_vertices, target.n_vertices, None),
-                       sample_chunk=sample_chunk)
+                       chunk=_chunk_for(source.n_vertices, target.n_vertices, None))
