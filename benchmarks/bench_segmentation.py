@@ -78,10 +78,10 @@ def main(argv=None) -> int:
     lab = shape_labels(ds, 0, template)
     # peers in the same run: the pull-back, and stop 27's default (the vote of the last three
     # maps of a continuation on every vertex)
-    runs = {"refined": dict(samples=est.samples), "p2p": dict(method="p2p"),
-            "refined, 3 maps on every vertex": dict(method=bj.RefinedPullBack(n_vote=3))}
+    peers = {"refined": dict(samples=est.samples), "p2p": dict(method="p2p"),
+             "refined, 3 maps on every vertex": dict(method=bj.RefinedPullBack(n_vote=3))}
     timed = {}
-    for name, kw in runs.items():
+    for name, kw in peers.items():
         times = timed[name] = []
         for _ in range(args.repeats + 1):
             t0 = time.perf_counter()
