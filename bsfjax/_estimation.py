@@ -247,25 +247,36 @@ def _taus(pb: _Problem):
     return jnp.stack([tau_descr, tau_lap, tau_comm, tau_orient.astype(tau_descr.dtype)])
 
 
+class _ShapeOps(NamedTuple):
+    """What the energy needs of one shape's descriptors: their coefficients and operators."""
+
+    F: jax.Array  # (k, p) Φᵀ A d
+    D: jax.Array  # (p, k, k) multiplication operators
+    O: jax.Array | None  # (p, k, k) orientation operators, or None without the geometry
+
+
+def _shape_ops(s: _Shape, normalize_descriptors: bool) -> _ShapeOps:
+    """One shape's share of :func:`_setup`: it depends on that shape alone, so a source matched
+    to many targets (:func:`bsfjax.transfer_collection`) computes it once."""
+    d = _normalize_columns(s.descr, s.mass) if normalize_descriptors else s.descr
+    O = None if s.geom is None else _orient_ops(s.evecs, s.geom, d)
+    return _ShapeOps(s.evecs.T @ (s.mass[:, None] * d), _mult_ops(s.evecs, s.mass, d), O)
+
+
 def _setup(sm: _Shape, sn: _Shape, w, *, lap_kind, gamma, normalize_descriptors,
-           normalize_weights, orient_sign) -> _Problem:
-    d_m, d_n = sm.descr, sn.descr
-    if normalize_descriptors:
-        d_m = _normalize_columns(d_m, sm.mass)
-        d_n = _normalize_columns(d_n, sn.mass)
-    F_m = sm.evecs.T @ (sm.mass[:, None] * d_m)
-    F_n = sn.evecs.T @ (sn.mass[:, None] * d_n)
-    D_m = _mult_ops(sm.evecs, sm.mass, d_m)
-    D_n = _mult_ops(sn.evecs, sn.mass, d_n)
-    O_m = O_n = None
-    if sm.geom is not None:
-        O_m = _orient_ops(sm.evecs, sm.geom, d_m)
-        O_n = orient_sign * _orient_ops(sn.evecs, sn.geom, d_n)
+           normalize_weights, orient_sign, ops_m: _ShapeOps | None = None) -> _Problem:
+    """The estimation problem of a pair.  ``ops_m``: the source's :func:`_shape_ops`, when the
+    caller has it already (``sm.descr`` is then not read)."""
+    om = _shape_ops(sm, normalize_descriptors) if ops_m is None else ops_m
+    on = _shape_ops(sn, normalize_descriptors)
+    if (om.O is None) != (on.O is None):
+        raise BSFError("the orientation term needs the geometry of both shapes")
+    O_n = None if on.O is None else orient_sign * on.O
     mask = _lap_mask(sm.evals, sn.evals, lap_kind, gamma)
     sign = jnp.sign(sm.evecs[0, 0] * sn.evecs[0, 0])
     c00 = jnp.where(sign == 0, 1.0, sign) * jnp.sqrt(jnp.sum(sn.mass) / jnp.sum(sm.mass))
     w = w / jnp.sum(w)
-    pb = _Problem(F_m, F_n, D_m, D_n, O_m, O_n, mask, w, c00)
+    pb = _Problem(om.F, on.F, om.D, on.D, om.O, O_n, mask, w, c00)
     if normalize_weights:
         pb = pb._replace(mu=w / _taus(pb))
     return pb

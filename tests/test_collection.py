@@ -125,6 +125,23 @@ def test_padded_targets_equal_the_one_pair_path(collection):
     assert np.sum(mass * (padded[0].labels == truth)) / mass.sum() > 0.9
 
 
+def test_source_operators_follow_each_targets_landmarks():
+    """The source's share of the estimation problem is computed once per set of source
+    landmarks (and unit-area factor) and reused: a target whose source landmarks differ from
+    the previous target's gets its own, so each result equals the target's run alone."""
+    small = bsfjax.example_pair(levels=1)
+    lms = [([0, 100, 200, 300],) * 2, ([5, 150, 250, 400],) * 2, ([0, 100, 200, 300],) * 2]
+    targets = [small.target] * 3
+    kw = dict(method="p2p", k=10, zoomout_samples=300)
+    together = dict(transfer_collection(small.source, small.labels, targets, landmarks=lms, **kw))
+    for i in (1, 2):
+        alone = dict(transfer_collection(small.source, small.labels, [small.target],
+                                         landmarks=[lms[i]], **kw))[0]
+        np.testing.assert_array_equal(together[i].p2p, alone.p2p)
+        np.testing.assert_allclose(together[i].C, alone.C, atol=1e-6)
+    assert not np.array_equal(together[0].C, together[1].C)  # the landmarks matter
+
+
 def test_errors_are_reported_per_target_or_raised(tmp_path):
     small = bsfjax.example_pair(levels=1)
     bad = tmp_path / "bad.off"

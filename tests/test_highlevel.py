@@ -35,6 +35,23 @@ def test_estimate_map_and_label_transfer(small_pair):
     assert exact.unassigned_share == 0
 
 
+def test_estimate_map_zoomout_step(small_pair):
+    """``zoomout_step`` is ZoomOut's ``step`` from the initial estimate: the point map equals
+    :func:`bsfjax.zoomout` with that step then :func:`bsfjax.fmap_to_p2p`, an independent route
+    (the unit-area rescaling is one common power of 4: exact); a bad step is named."""
+    pair, sm, sn = small_pair
+    lm = example_landmarks(pair)
+    maps = {}
+    for step in (1, 3):
+        est = estimate_map(sm, sn, k=20, landmarks=(lm, lm), refine_to=40, zoomout_step=step)
+        C = bsfjax.zoomout(est.C_initial, sm, sn, 40, step=step)
+        np.testing.assert_array_equal(est.p2p, bsfjax.fmap_to_p2p(C, sm, sn))
+        maps[step] = est.p2p
+    assert not np.array_equal(maps[1], maps[3])  # the step changes the path
+    with pytest.raises(ValueError, match="step must be a positive integer"):
+        estimate_map(sm, sn, k=20, landmarks=(lm, lm), refine_to=40, zoomout_step=0)
+
+
 def test_transfer_values_errors(small_pair):
     pair, sm, sn = small_pair
     C = np.eye(20)
