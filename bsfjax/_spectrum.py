@@ -152,8 +152,10 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
 
             * ``"auto"`` (default): ``"dense"`` when ``n <= DENSE_LIMIT``, else ``"block"``
               when the optional CHOLMOD backend (``pip install 'bsfjax[fast]'``, the
-              ``cholespy`` package) is installed and ``n ≥ BLOCK_MIN_VERTICES`` (20K), else
-              ``"lanczos"``.
+              ``cholespy`` package) is installed and ``n ≥ BLOCK_MIN_VERTICES`` (20K) or
+              ``k ≥ BLOCK_MIN_K`` (100), else ``"lanczos"``; where the block solver fails (a
+              multiplicity above its block size) ``"auto"`` goes on with ``"lanczos"``
+              silently.
             * ``"block"``: block Lanczos on ``(W − σA)⁻¹`` (:mod:`._eigensolver`),
               exact: every pair reaches ``‖Kψ − λψ‖ ≤ 10⁻⁸ λ_k`` by the Krylov estimate and
               ``≤ 10⁻⁶ λ_k`` recomputed (``K = A^-½ W A^-½``, ``ψ = A^½ φ``); on the TOSCA cat
@@ -211,6 +213,7 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
                               or not np.isfinite(sigma)):
         raise BSFError(f"sigma must be a finite number or None, got {sigma!r}")
     Am = sp.diags(a).tocsr()
+    chosen = method != "auto"  # a fallback from a solver the user named is worth a warning
     method = _resolve_method(method, n, k)
     if method == "dense":
         evals, evecs = scipy.linalg.eigh(W.toarray(), np.diag(a), subset_by_index=[0, k - 1])
@@ -228,7 +231,8 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
                                                     tol=FAST_TOL if method == "fast" else 1e-8)
                 except (BSFError, RuntimeError) as exc:  # a missed multiplicity, no
                     # convergence, or W − σA not positive definite (σ above λ₁): ARPACK
-                    warnings.warn(f"{exc}; falling back to method='lanczos'", stacklevel=2)
+                    if chosen:
+                        warnings.warn(f"{exc}; falling back to method='lanczos'", stacklevel=2)
             if evals is None:
                 v0 = np.random.default_rng(0).standard_normal(n)  # fixed start: deterministic
                 evals, evecs = scipy.sparse.linalg.eigsh(W.tocsc(), k=k, M=Am.tocsc(),
@@ -257,9 +261,17 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
 #: (block solver against ARPACK, best of two, 2 cores): k = 100, 6.9K vertices 0.37 s against
 #: 0.46 s, 10K 0.53 s against 0.71 s, 27.9K 1.45 s against 3.19 s; k = 30, 6.9K 0.15 s against
 #: 0.11 s, 10K 0.21 s against 0.19 s, 27.9K 0.59 s against 0.63 s.  From 20K it is as fast at
-#: small k and much faster at large k; below, the gain at k = 100 is small and the spectra of
-#: the FAUST-sized meshes every documented result was computed with stay ARPACK's.
+#: small k and much faster at large k; below, it wins at large k only (:data:`BLOCK_MIN_K`).
 BLOCK_MIN_VERTICES = 20_000
+
+#: ... and for any size from this many eigenpairs on.  Measured at stop 29 (median of 4, 2
+#: cores, k = 100): 2.0K vertices 0.11 s against ARPACK's 0.18 s, 3.4K 0.25 / 0.25, 4.1K 0.25 /
+#: 0.28, 5.0K 0.23 / 0.36, 5.5K 0.26 / 0.36, 6.9K 0.32 / 0.45; the eigenvectors equal ARPACK's
+#: to 1 − |cos| ≤ 4e-15 and the eigenvalues to 1.3e-14 λ_k on the 4.1K–6.9K meshes (the 54
+#: accuracies of ``bench_segmentation.py --quick-maps``, which use ``refined``'s 100
+#: eigenpairs, are equal to the last digit).  At k = 30 ARPACK stays faster on FAUST (0.11
+#: against 0.15 s).
+BLOCK_MIN_K = 100
 
 
 def _resolve_method(method: str, n: int, k: int) -> str:
@@ -267,7 +279,8 @@ def _resolve_method(method: str, n: int, k: int) -> str:
     if n <= DENSE_LIMIT or k >= n - 1:
         return "dense"  # small problems: LAPACK (and ARPACK needs k < n - 1)
     if method == "auto":
-        return "block" if has_cholmod() and n >= BLOCK_MIN_VERTICES else "lanczos"
+        big = n >= BLOCK_MIN_VERTICES or k >= BLOCK_MIN_K
+        return "block" if big and has_cholmod() else "lanczos"
     if method in ("block", "fast") and k + 2 * default_block(k) > n:
         return "lanczos"  # the block basis would not fit: ARPACK needs fewer vectors
     return method

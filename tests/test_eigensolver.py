@@ -4,6 +4,8 @@ references, both linear-solver backends, breakdown, non-convergence and the cach
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -259,6 +261,9 @@ def test_method_option_and_cache_key(tmp_path, sphere3):
     assert spec_mod._resolve_method("auto", 500, 10) == "dense"
     assert spec_mod._resolve_method("auto", 5000, 10) == "lanczos"  # ARPACK is faster there
     assert spec_mod._resolve_method("auto", 50_000, 10) == ("block" if has_cholmod() else "lanczos")
+    # from 100 eigenpairs the block solver is the faster at any size (stop 29: 5.5K, 0.26 s
+    # against 0.36 s)
+    assert spec_mod._resolve_method("auto", 5000, 100) == ("block" if has_cholmod() else "lanczos")
     assert spec_mod._resolve_method("fast", 5000, 10) == "fast"
     keys = {spec_mod._cache_key(sphere3, 10, "mixed", False, m)
             for m in ("block", "lanczos", "dense", "fast")}
@@ -272,3 +277,23 @@ def test_method_option_and_cache_key(tmp_path, sphere3):
     again = bsfjax.spectrum(sphere3, 10, cache_dir=tmp_path, method="lanczos")
     np.testing.assert_array_equal(again.evecs, first.evecs)
     np.testing.assert_allclose(fast.evals, first.evals, rtol=1e-5, atol=1e-8)
+
+
+def test_auto_falls_back_silently(sphere3, monkeypatch):
+    """Where ``"auto"`` picks the block solver and it fails (here made to fail, as it does on a
+    multiplicity above its block), ``"auto"`` goes on with ARPACK without a warning: the user
+    chose no solver.  The spectrum is ARPACK's; a solver the user named warns."""
+    spec_mod = __import__("bsfjax._spectrum", fromlist=["x"])
+
+    def fails(*args, **kwargs):
+        raise MissedEigenvalue("missed 1 eigenvalue")
+    monkeypatch.setattr(spec_mod, "block_lanczos", fails)
+    monkeypatch.setattr(spec_mod, "has_cholmod", lambda: True)
+    assert spec_mod._resolve_method("auto", sphere3.n_vertices, 100) == "block"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        auto = bsfjax.spectrum(sphere3, 100)
+    ref = bsfjax.spectrum(sphere3, 100, method="lanczos")
+    np.testing.assert_array_equal(auto.evals, ref.evals)
+    with pytest.warns(UserWarning, match="missed 1 eigenvalue; falling back"):
+        bsfjax.spectrum(sphere3, 100, method="block")
