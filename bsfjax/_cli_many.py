@@ -165,7 +165,8 @@ def cmd_transfer_many(args, error) -> int:
     results = transfer_collection(
         source, values, [targets[i] for i in todo], labels=labels, method=args.method, k=args.k,
         landmarks=lambda j: landmarks.get(todo[j]), threshold=args.threshold,
-        errors="report", spectrum_cache=args.spectrum_cache)
+        errors="report", spectrum_cache=args.spectrum_cache,
+        batch=1 if args.batch is None else args.batch)
     mine = len(process_share(range(len(todo))))
     bar = tqdm(total=mine, desc="targets", unit="target", disable=args.no_progress,
                file=sys.stderr)

@@ -72,6 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth-dir", help="--out-dir: folder of <target name>.txt/.npy ground "
                                        "truths; summary.json reports each accuracy")
     p.add_argument("--overwrite", action="store_true", help="--out-dir: recompute complete outputs")
+    p.add_argument("--batch", type=int, default=None,
+                   help="--out-dir: targets per device run together under vmap (default 1; "
+                        "for accelerators, a CPU gains nothing)")
     p.add_argument("--spectrum-cache", help="folder caching the eigenbases between runs")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--coordinator", help="--out-dir on several processes (jax.distributed): "
@@ -222,7 +225,8 @@ def coloured_point_data(result, labels: bool) -> dict:
 #: Options of the multi-target form only, and of the one-target form only.
 _MANY_ONLY = (("landmarks_file", "--landmarks-file"), ("truth_dir", "--truth-dir"),
               ("mesh_out_dir", "--mesh-out-dir"), ("coordinator", "--coordinator"),
-              ("num_processes", "--num-processes"), ("process_id", "--process-id"))
+              ("num_processes", "--num-processes"), ("process_id", "--process-id"),
+              ("batch", "--batch"))
 _ONE_ONLY = (("out", "--out"), ("landmarks", "--landmarks"), ("mesh_out", "--mesh-out"),
              ("truth", "--truth"))
 
@@ -444,7 +448,7 @@ def _join_option_values(argv: list[str]) -> list[str]:
 
 #: (attribute, option, smallest value) of the integer options, checked before any work.
 _INT_OPTIONS = (("seed", "--seed", 0), ("functions", "--functions", 1), ("pairs", "--pairs", 1),
-                ("k", "-k", 1), ("levels", "--levels", 1))
+                ("k", "-k", 1), ("levels", "--levels", 1), ("batch", "--batch", 1))
 
 
 def _check_transfer_form(args) -> None:

@@ -142,6 +142,27 @@ def test_source_operators_follow_each_targets_landmarks():
     assert not np.array_equal(together[0].C, together[1].C)  # the landmarks matter
 
 
+def test_batched_targets_equal_one_at_a_time():
+    """``batch=2``: the targets of a bucket run two at a time under ``vmap``, the last group
+    short of one (filled with a copy): the same point maps and labels as ``batch=1``, the maps
+    and scores to float round-off, each target's result in its own slot."""
+    small = bsfjax.example_pair(levels=1)
+    large = bsfjax.example_pair(levels=2)
+    targets = [small.target, large.target, small.target, large.target, small.target]
+    kw = dict(method="refined", k=10, zoomout_samples=300)
+    one = dict(transfer_collection(small.source, small.labels, targets, **kw))
+    two = dict(transfer_collection(small.source, small.labels, targets, batch=2, **kw))
+    assert sorted(two) == list(range(5))
+    for i, t in enumerate(targets):
+        assert two[i].p2p.shape == (t.n_vertices,)
+        np.testing.assert_array_equal(two[i].p2p, one[i].p2p)
+        np.testing.assert_array_equal(two[i].labels, one[i].labels)
+        np.testing.assert_allclose(two[i].C, one[i].C, atol=1e-5)
+        np.testing.assert_allclose(two[i].values, one[i].values, atol=1e-5)
+    with pytest.raises(BSFError, match="batch must be an integer >= 1"):
+        next(transfer_collection(small.source, small.labels, targets, batch=0))
+
+
 def test_errors_are_reported_per_target_or_raised(tmp_path):
     small = bsfjax.example_pair(levels=1)
     bad = tmp_path / "bad.off"
