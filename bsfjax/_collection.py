@@ -494,7 +494,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             if len(ops_cache) >= 4 * len(devices):  # per-target source landmarks: bounded
                 ops_cache.pop(next(iter(ops_cache)))
             r, lm = jax.device_put(_cast_tree((np.float64(tg.ratio), lm)), devices[i])
-            ops_cache[key] = _stages_for(cfg)[0](on_device[cfg.n_landmarks][i], r, lm)
+            ops_stage = _stages_for(cfg, batch > 1)[0]  # (never batched: once per key)
+            ops_cache[key] = ops_stage(on_device[cfg.n_landmarks][i], r, lm)
         return ops_cache[key]
 
     def launch(key, group: list[_Target]):
