@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import numpy as np
 import pytest
 
@@ -142,16 +143,18 @@ def test_source_operators_follow_each_targets_landmarks():
     assert not np.array_equal(together[0].C, together[1].C)  # the landmarks matter
 
 
-def test_batched_targets_equal_one_at_a_time():
+@pytest.mark.parametrize("x64", [False, True])
+def test_batched_targets_equal_one_at_a_time(x64):
     """``batch=2``: the targets of a bucket run two at a time under ``vmap``, the last group
     short of one (filled with a copy): the same point maps and labels as ``batch=1``, the maps
-    and scores to float round-off, each target's result in its own slot."""
+    and scores to float round-off, each target's result in its own slot (float32 and 64)."""
     small = bsfjax.example_pair(levels=1)
     large = bsfjax.example_pair(levels=2)
     targets = [small.target, large.target, small.target, large.target, small.target]
     kw = dict(method="refined", k=10, zoomout_samples=300)
-    one = dict(transfer_collection(small.source, small.labels, targets, **kw))
-    two = dict(transfer_collection(small.source, small.labels, targets, batch=2, **kw))
+    with jax.enable_x64(x64):
+        one = dict(transfer_collection(small.source, small.labels, targets, **kw))
+        two = dict(transfer_collection(small.source, small.labels, targets, batch=2, **kw))
     assert sorted(two) == list(range(5))
     for i, t in enumerate(targets):
         assert two[i].p2p.shape == (t.n_vertices,)
