@@ -1,7 +1,7 @@
 """One source to many targets (issue 16): one ``bsfjax transfer ... --out-dir`` call against
 separate ``bsfjax transfer ... --out`` calls, seconds per target after start-up, compilations.
 
-    python benchmarks/bench_collection.py --out R [--quick]
+    python benchmarks/bench_collection.py --out R [--quick] [--batch B]
 
 Sets (meshes from ../shared/data, read by path, nothing copied into the repository):
 
@@ -18,7 +18,8 @@ For each set: the wall time of one call and of the separate calls (each a fresh 
 user runs them, JAX's persistent compilation cache off), the accuracy of both, the two again
 with a warm compilation cache (the second of two rounds), and in one process the seconds per target once
 compiled (a second pass) with the number of compilations of the first pass.
-``--quick``: the ``six`` set only.
+``--quick``: the ``six`` set only.  ``--batch B``: the one-call runs (``--batch B``) and the
+in-process passes (``batch=B``) run B targets per device under ``vmap`` (for accelerators).
 """
 
 from __future__ import annotations
@@ -137,10 +138,11 @@ def accuracy(labels: np.ndarray, truth: np.ndarray, mesh_path: Path) -> float:
     return float(np.sum(mass * (labels == truth)) / mass.sum())
 
 
-def measure(name, source, labels_file, targets, folder: Path, truth: bool, k: int = 30) -> dict:
+def measure(name, source, labels_file, targets, folder: Path, truth: bool, k: int = 30,
+            batch: int = 1) -> dict:
     out_one, out_sep = folder / f"{name}_one", folder / f"{name}_sep"
     out_sep.mkdir()
-    extra = ["--truth-dir", folder / "truth"] if truth else []
+    extra = (["--truth-dir", folder / "truth"] if truth else []) + ["--batch", batch]
     wall_one, _ = cli("transfer", source, *targets, "--labels", labels_file, "--out-dir", out_one,
                       "-k", k, "--no-progress", *extra)
     summary = json.loads((out_one / "summary.json").read_text())["targets"]
@@ -158,16 +160,17 @@ def measure(name, source, labels_file, targets, folder: Path, truth: bool, k: in
     warm = {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(folder / f"{name}_jax_cache")}
     for rnd in (1, 2):
         w1, _ = cli("transfer", source, *targets, "--labels", labels_file, "--out-dir",
-                    folder / f"{name}_warm{rnd}", "-k", k, "--no-progress", env=warm)
+                    folder / f"{name}_warm{rnd}", "-k", k, "--no-progress", "--batch", batch,
+                    env=warm)
         ws = sum(cli("transfer", source, p, "--labels", labels_file, "--out",
                      folder / f"{name}_warm{rnd}_{p.stem}.txt", "-k", k, env=warm)[0]
                  for p in targets)
-    steady = in_process(source, labels_file, targets, k)
+    steady = in_process(source, labels_file, targets, k, batch)
     steady.update(wall_one_call_warm_cache_s=w1, wall_separate_calls_warm_cache_s=ws)
     if name == "six":
         steady["kill_and_resume"] = kill_and_resume(source, labels_file, targets, folder,
                                                     out_one, k)
-    res = {"set": name, "targets": len(targets),
+    res = {"set": name, "targets": len(targets), "batch": batch,
            "vertices": [r["vertices"] for r in summary],
            "wall_one_call_s": wall_one, "wall_separate_calls_s": wall_sep,
            "speedup": wall_sep / wall_one, **steady}
@@ -202,7 +205,7 @@ def kill_and_resume(source, labels_file, targets, folder: Path, reference: Path,
             "rerun_status": r.returncode, "files_equal_uninterrupted": same}
 
 
-def in_process(source, labels_file, targets, k) -> dict:
+def in_process(source, labels_file, targets, k, batch: int = 1) -> dict:
     """First pass (compilations counted) and second pass (compiled) in one process."""
     code = f"""
 import json, time, numpy as np, warnings
@@ -217,7 +220,7 @@ targets = {[str(t) for t in targets]!r}
 out = {{}}
 for p in (1, 2):
     c0, t = n[0], time.perf_counter()
-    res = dict(bsfjax.transfer_collection({str(source)!r}, lab, targets, k={k}))
+    res = dict(bsfjax.transfer_collection({str(source)!r}, lab, targets, k={k}, batch={batch}))
     out[p] = dict(seconds=time.perf_counter() - t, compiles=n[0] - c0,
                   per_target=[res[i].seconds for i in range(len(targets))],
                   vertices=[res[i].n_vertices for i in range(len(targets))])
@@ -242,6 +245,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--batch", type=int, default=1, help="targets per device under vmap")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -259,7 +263,7 @@ def main() -> None:
             src, lab, tosca = make_tosca(folder)
             sets.append(("tosca", src, lab, tosca, False))
         for name, src, lab, targets, truth in sets:
-            r = measure(name, src, lab, targets, folder, truth)
+            r = measure(name, src, lab, targets, folder, truth, batch=args.batch)
             rows.append(r)
             print(json.dumps(r), flush=True)
     (out / "collection.json").write_text(json.dumps(rows, indent=1) + "\n")
