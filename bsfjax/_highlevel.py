@@ -24,7 +24,7 @@ from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._indicators import labels_to_indicators
 from ._sampling import farthest_point_sampling, subsample
 from ._spectrum import Spectrum, map_to_unit_area, unit_area_pair
-from ._validate import check_indices, check_source_mesh, compact_labels
+from ._validate import check_indices, check_int, check_source_mesh, compact_labels
 
 __all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", "LabelTransfer",
            "REGIMES"]
@@ -99,6 +99,7 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     refine_to = km if refine_to is None else refine_to
     if not isinstance(refine_to, (int, np.integer)) or not k <= refine_to <= km:
         raise BSFError(f"refine_to must be an integer in [{k}, {km}], got {refine_to!r}")
+    check_int(zoomout_step, "zoomout_step", 1)
     lm = _check_landmarks(landmarks, source.n_vertices, target.n_vertices)
     # the estimation runs on the unit-area shapes (float64 rescaling before any float32 cast);
     # the maps are converted back to the given bases at the end

@@ -48,8 +48,9 @@ def test_estimate_map_zoomout_step(small_pair):
         np.testing.assert_array_equal(est.p2p, bsfjax.fmap_to_p2p(C, sm, sn))
         maps[step] = est.p2p
     assert not np.array_equal(maps[1], maps[3])  # the step changes the path
-    with pytest.raises(ValueError, match="step must be a positive integer"):
-        estimate_map(sm, sn, k=20, landmarks=(lm, lm), refine_to=40, zoomout_step=0)
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="zoomout_step must be an integer >= 1"):
+            estimate_map(sm, sn, k=20, landmarks=(lm, lm), refine_to=40, zoomout_step=bad)
 
 
 def test_transfer_values_errors(small_pair):
