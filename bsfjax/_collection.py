@@ -178,11 +178,11 @@ def _shape(s: Spectrum, geom: _Geometry | None, cfg: _Config, descr=None) -> _Sh
                  jnp.result_type(float))
 
 
-def _geometries(rep, it, cfg: _Config):
+def _geometry_of(arrays, cfg: _Config) -> _Geometry | None:
+    """A shape's geometry for the orientation term (used without landmarks only)."""
     if cfg.n_landmarks:
-        return None, None
-    return (_Geometry(rep["faces"], rep["K"], rep["third_area"]),
-            _Geometry(it["faces"], it["K"], it["third_area"]))
+        return None
+    return _Geometry(arrays["faces"], arrays["K"], arrays["third_area"])
 
 
 def _source_ops_stage(rep, r, lm_m, *, cfg: _Config):
@@ -190,9 +190,8 @@ def _source_ops_stage(rep, r, lm_m, *, cfg: _Config):
     operators) at unit-area factor ``r`` with source landmarks ``lm_m``: once for all the
     targets that share them, not once per target (0.06 s of the problem stage's 0.10 s on a
     5.5K-vertex target)."""
-    geom_m = None if cfg.n_landmarks else _Geometry(rep["faces"], rep["K"], rep["third_area"])
     src = _source_spectrum(rep, r)
-    return _shape_ops(_shape(src, geom_m, cfg, _descriptors(src, lm_m, cfg)),
+    return _shape_ops(_shape(src, _geometry_of(rep, cfg), cfg, _descriptors(src, lm_m, cfg)),
                       normalize_descriptors=True)
 
 
@@ -203,10 +202,10 @@ def _problem_stage(rep, it, ops_m, *, cfg: _Config):
     dt = jnp.result_type(float)
     km = cfg.k_map
     src, tgt = _spectra(rep, it)
-    geom_m, geom_n = _geometries(rep, it, cfg)
     weights = FmapWeights() if cfg.n_landmarks else FmapWeights(orient=ORIENT_WEIGHT)
-    sn = _shape(tgt, geom_n, cfg, _descriptors(tgt, it.get("landmarks_target"), cfg))
-    sm = _shape(src, geom_m, cfg)  # its descriptors' operators: ops_m
+    sn = _shape(tgt, _geometry_of(it, cfg), cfg,
+                _descriptors(tgt, it.get("landmarks_target"), cfg))
+    sm = _shape(src, None, cfg)  # its descriptors' operators (orientation too): ops_m
     pb = _setup(sm, sn, jnp.asarray(_weights_array(weights), dt), lap_kind="resolvent",
                 gamma=jnp.asarray(0.5, dt), normalize_descriptors=True, normalize_weights=True,
                 orient_sign=1.0, ops_m=ops_m)
@@ -491,7 +490,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         lm = None if tg.landmarks is None else np.asarray(tg.landmarks[0], np.int32)
         key = (cfg, tg.ratio, None if lm is None else lm.tobytes(), i)
         if key not in ops_cache:
-            if len(ops_cache) >= 4 * len(devices):  # per-target source landmarks: bounded
+            if len(ops_cache) >= 4 * len(devices) * batch:  # per-target source landmarks
                 ops_cache.pop(next(iter(ops_cache)))
             r, lm = jax.device_put(_cast_tree((np.float64(tg.ratio), lm)), devices[i])
             ops_stage = _stages_for(cfg, batch > 1)[0]  # (never batched: once per key)
