@@ -145,6 +145,31 @@ def test_transfer_command_bad_input_in_a_subprocess(cli_files):
     assert "Traceback" not in r.stderr and r.stderr.strip().count("\n") == 0
 
 
+def test_compilation_cache_keeps_every_program(cli_files, tmp_path):
+    """The command keeps every compiled program in the persistent cache, not only those that
+    took JAX's default second to compile (then none of this small run's would be kept), and
+    a second run reads them back to the same output."""
+    import os
+
+    d, _ = cli_files
+    cache = tmp_path / "jax-cache"
+    env = {k: v for k, v in os.environ.items() if k != "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"}
+    env["JAX_COMPILATION_CACHE_DIR"] = str(cache)
+    args = [sys.executable, "-m", "bsfjax.cli", "transfer", str(d / "src.ply"), str(d / "tgt.off"),
+            "--labels", str(d / "labels.txt"), "--map", "p2p", str(d / "identity.npy"), "-k", "10"]
+    outs = []
+    for i in (1, 2):
+        outs.append(tmp_path / f"out{i}.txt")
+        r = subprocess.run(args + ["--out", str(outs[-1])], capture_output=True, text=True,
+                           env=env)
+        assert r.returncode == 0, r.stderr
+        if i == 1:
+            kept = len(list(cache.iterdir()))
+            assert kept >= 10, kept  # ~18 programs; with JAX's default threshold: 0
+    assert len(list(cache.iterdir())) == kept  # the second run compiled nothing new
+    assert outs[0].read_text() == outs[1].read_text()
+
+
 def test_example_command_writes_a_pair_that_transfer_reads(tmp_path, capsys):
     d = tmp_path / "ex"
     assert main(["example", "--out", str(d), "--levels", "2"]) == 0
