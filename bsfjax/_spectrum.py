@@ -153,7 +153,7 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
             * ``"auto"`` (default): ``"dense"`` when ``n <= DENSE_LIMIT``, else ``"block"``
               when the optional CHOLMOD backend (``pip install 'bsfjax[fast]'``, the
               ``cholespy`` package) is installed and ``n ≥ BLOCK_MIN_VERTICES`` (20K) or
-              ``k ≥ BLOCK_MIN_K`` (100), else ``"lanczos"``; where the block solver fails (a
+              ``k ≥ BLOCK_MIN_K`` (45), else ``"lanczos"``; where the block solver fails (a
               multiplicity above its block size) ``"auto"`` goes on with ``"lanczos"``
               silently.
             * ``"block"``: block Lanczos on ``(W − σA)⁻¹`` (:mod:`._eigensolver`),
@@ -265,13 +265,14 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
 BLOCK_MIN_VERTICES = 20_000
 
 #: ... and for any size from this many eigenpairs on.  Measured at stop 29 (median of 4, 2
-#: cores, k = 100): 2.0K vertices 0.11 s against ARPACK's 0.18 s, 3.4K 0.25 / 0.25, 4.1K 0.25 /
-#: 0.28, 5.0K 0.23 / 0.36, 5.5K 0.26 / 0.36, 6.9K 0.32 / 0.45; the eigenvectors equal ARPACK's
-#: to 1 − |cos| ≤ 4e-15 and the eigenvalues to 1.3e-14 λ_k on the 4.1K–6.9K meshes (the 54
-#: accuracies of ``bench_segmentation.py --quick-maps``, which use ``refined``'s 100
-#: eigenpairs, are equal to the last digit).  At k = 30 ARPACK stays faster on FAUST (0.11
-#: against 0.15 s).
-BLOCK_MIN_K = 100
+#: cores; ARPACK / block): k = 100, 2.0K vertices 0.18 / 0.11 s, 3.4K 0.25 / 0.25, 4.1K 0.28 /
+#: 0.25, 5.0K 0.36 / 0.23, 5.5K 0.36 / 0.26, 6.9K 0.45 / 0.32; k = 60, 2.0K 0.12 / 0.08, 3.4K
+#: 0.19 / 0.14, 5.0K 0.22 / 0.15, 5.5K 0.22 / 0.22, 6.9K 0.28 / 0.24; k = 45, 4.1K 0.14 / 0.11,
+#: 5.0K 0.18 / 0.12, 6.9K 0.22 / 0.17; k = 30 mixed (4.1K 0.085 / 0.103, 5.0K 0.13 / 0.10).  The
+#: eigenvectors equal ARPACK's to 1 − |cos| ≤ 4e-15 and the eigenvalues to 1.3e-14 λ_k (k =
+#: 100, 4.1K–6.9K meshes; the 54 accuracies of ``bench_segmentation.py --quick-maps``, which
+#: use ``refined``'s 100 eigenpairs, are equal to the last digit).
+BLOCK_MIN_K = 45
 
 
 def _resolve_method(method: str, n: int, k: int) -> str:

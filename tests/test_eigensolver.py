@@ -261,9 +261,10 @@ def test_method_option_and_cache_key(tmp_path, sphere3):
     assert spec_mod._resolve_method("auto", 500, 10) == "dense"
     assert spec_mod._resolve_method("auto", 5000, 10) == "lanczos"  # ARPACK is faster there
     assert spec_mod._resolve_method("auto", 50_000, 10) == ("block" if has_cholmod() else "lanczos")
-    # from 100 eigenpairs the block solver is the faster at any size (stop 29: 5.5K, 0.26 s
-    # against 0.36 s)
-    assert spec_mod._resolve_method("auto", 5000, 100) == ("block" if has_cholmod() else "lanczos")
+    # from 45 eigenpairs the block solver is the faster at any size (stop 29, k = 100 at 5.5K:
+    # 0.26 s against 0.36 s; k = 45 at 5.0K: 0.12 s against 0.18 s)
+    assert spec_mod._resolve_method("auto", 5000, 45) == ("block" if has_cholmod() else "lanczos")
+    assert spec_mod._resolve_method("auto", 5000, 44) == "lanczos"
     assert spec_mod._resolve_method("fast", 5000, 10) == "fast"
     keys = {spec_mod._cache_key(sphere3, 10, "mixed", False, m)
             for m in ("block", "lanczos", "dense", "fast")}
