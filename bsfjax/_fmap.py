@@ -116,7 +116,7 @@ def _chunk_for(n_ref: int, n_query: int, chunk_size: int | None) -> int:
 # --------------------------------------------------------------------------- jitted kernels
 
 
-def _nearest(ref: jax.Array, qry: jax.Array, chunk: int) -> jax.Array:
+def _nearest(ref: jax.Array, qry: jax.Array, chunk: int, n_valid=None) -> jax.Array:
     """Index of the nearest row of ``ref`` ``(n_r, d)`` for every row of ``qry`` ``(n_q, d)``.
 
     Exact up to ties: the expanded distance ‖r‖² − 2 q·r (one GEMM per chunk of queries) is
@@ -125,6 +125,11 @@ def _nearest(ref: jax.Array, qry: jax.Array, chunk: int) -> jax.Array:
     :data:`_N_BLOCKS` smallest expanded distances) is re-scored by the direct ‖q − r‖².  A block
     minimum is a plain vectorized reduction, while XLA CPU's argmin / top-k over all ``n_r``
     columns are several times slower than the GEMM itself.  Memory: ``chunk × n_r``.
+
+    ``n_valid`` (traced, optional): only the first ``n_valid`` queries are real (a target
+    padded to its size bucket); the chunks past them are skipped and answer 0.  A 5.0K target
+    in the 8192 bucket of a small collection then searches 20 chunks instead of 32.  (Under
+    ``vmap`` the skip becomes a select: the same answers, no saving.)
     """
     n_q, d = qry.shape
     n_r = ref.shape[0]
@@ -156,19 +161,26 @@ def _nearest(ref: jax.Array, qry: jax.Array, chunk: int) -> jax.Array:
         ids = (blk[:, :, None] * _BLOCK + offsets).reshape(q.shape[0], n_top * _BLOCK)
         exact = jnp.where(ids < n_r, exact, jnp.inf)
         best = jnp.argmin(exact, axis=1)
-        return jnp.take_along_axis(ids, best[:, None], axis=1)[:, 0]
+        return jnp.take_along_axis(ids, best[:, None], axis=1)[:, 0].astype(jnp.int32)
 
-    out = lax.map(one_chunk, qp.reshape(n_chunks, chunk, d))
+    chunks = qp.reshape(n_chunks, chunk, d)
+    if n_valid is None:
+        out = lax.map(one_chunk, chunks)
+    else:
+        skip = lambda q: jnp.zeros(q.shape[0], jnp.int32)  # noqa: E731
+        out = lax.map(lambda a: lax.cond(a[0] * chunk < n_valid, one_chunk, skip, a[1]),
+                      (jnp.arange(n_chunks), chunks))
     return out.reshape(-1)[:n_q].astype(jnp.int32)
 
 
-def _to_p2p(C, evecs_m, evecs_n, chunk: int, adjoint: bool):
-    """Point map N → M of ``C`` (k_N, k_M) with Φ_M (n_M, k_M), Φ_N (n_N, k_N)."""
+def _to_p2p(C, evecs_m, evecs_n, chunk: int, adjoint: bool, n_valid=None):
+    """Point map N → M of ``C`` (k_N, k_M) with Φ_M (n_M, k_M), Φ_N (n_N, k_N) (``n_valid``:
+    as :func:`_nearest`, the target's real vertices)."""
     if adjoint:
         ref, qry = evecs_m, evecs_n @ C
     else:
         ref, qry = evecs_m @ C.T, evecs_n
-    return _nearest(ref, qry, chunk)
+    return _nearest(ref, qry, chunk, n_valid)
 
 
 def _from_p2p(p2p, evecs_m, evecs_n, mass_n):

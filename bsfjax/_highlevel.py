@@ -24,6 +24,7 @@ from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._indicators import labels_to_indicators
 from ._sampling import farthest_point_sampling, subsample
 from ._spectrum import Spectrum, map_to_unit_area, unit_area_pair
+from ._threads import on_one_blas_thread
 from ._validate import check_indices, check_int, check_source_mesh, compact_labels
 
 __all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", "LabelTransfer",
@@ -67,6 +68,7 @@ ZOOMOUT_SAMPLES = 2000
 ZOOMOUT_STEP = 2
 
 
+@on_one_blas_thread
 def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=None,
                  refine_to: int | None = None, n_energies: int = 100, source_mesh=None,
                  target_mesh=None, zoomout_samples: int | None = ZOOMOUT_SAMPLES,
@@ -127,6 +129,7 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     return MapEstimate(C=back(C), p2p=p2p, C_initial=back(C0), samples=samples)
 
 
+@on_one_blas_thread
 def transfer_values(source: Spectrum, target: Spectrum,
                     values: Float[ArrayLike, "m n_M"] | Float[ArrayLike, " n_M"], *,
                     method: AbstractMethod | str = "omp",
@@ -237,6 +240,7 @@ def _regime(agreement: float | None, confidence: float) -> str:
     return "kept" if agreement >= 0.99 else "refined" if agreement >= 0.9 else "corrected"
 
 
+@on_one_blas_thread
 def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, " n_M"], *,
                     method: AbstractMethod | str = "refined", threshold: float | None = None,
                     **kwargs) -> LabelTransfer:

@@ -127,7 +127,7 @@ def refine_core(p2p, spec_m: Spectrum, spec_n: Spectrum, *, sizes: tuple[int, ..
                 s = weight * _vertex_mean(jnp.linalg.norm(qry, axis=1), w_n > 0)
                 ref = jnp.concatenate([ref, s * dm], axis=1)
                 qry = jnp.concatenate([qry, s * dn], axis=1)
-            p = _nearest(ref, qry, chunk)
+            p = _nearest(ref, qry, chunk, jnp.sum(w_n > 0))  # (padding last: skipped)
             nxt = (cols < sizes_arr[it + 1]).astype(dt)
             return _from_p2p(p, phi_m * nxt, phi_n * nxt, w_n), to_vertices(p)
 

@@ -28,6 +28,7 @@ from ._eigensolver import block_lanczos, default_block, has_cholmod
 from ._errors import BSFError, MeshError
 from ._laplacian import MASS_TYPES, laplacian
 from ._mesh import Mesh, n_components
+from ._threads import ONE_THREAD_BELOW, one_blas_thread
 
 __all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum", "stack_spectra",
            "unit_area", "map_to_unit_area"]
@@ -136,6 +137,40 @@ def _shift_invert(W: sp.csr_matrix, Am: sp.csr_matrix, sigma: float):
     return scipy.sparse.linalg.LinearOperator((n, n), matvec=lu.solve, dtype=np.float64)
 
 
+def _solve(W, a, Am, k: int, sigma, method: str, chosen: bool):
+    """The solver's ``(evals, evecs)`` (``method`` resolved; ``chosen``: the user named it)."""
+    n = W.shape[0]
+    if method == "dense":
+        evals, evecs = scipy.linalg.eigh(W.toarray(), np.diag(a), subset_by_index=[0, k - 1])
+    else:
+        if sigma is None:
+            scale = float(W.diagonal().mean() / a.mean())  # ~ largest eigenvalues' scale
+            sigma = -1e-6 * scale
+        try:
+            evals = None
+            # the block solver needs σ below the spectrum (W − σA positive definite): W is
+            # positive semidefinite, so any σ < 0 is; a user's σ >= 0 goes to ARPACK
+            if method in ("block", "fast") and sigma < 0:
+                try:
+                    evals, evecs, _ = block_lanczos(W, a, k, sigma,
+                                                    tol=FAST_TOL if method == "fast" else 1e-8)
+                except (BSFError, RuntimeError) as exc:  # a missed multiplicity, no
+                    # convergence, or W − σA not positive definite (σ above λ₁): ARPACK
+                    if chosen:
+                        warnings.warn(f"{exc}; falling back to method='lanczos'", stacklevel=3)
+            if evals is None:
+                v0 = np.random.default_rng(0).standard_normal(n)  # fixed start: deterministic
+                evals, evecs = scipy.sparse.linalg.eigsh(W.tocsc(), k=k, M=Am.tocsc(),
+                                                         sigma=sigma, which="LM", v0=v0,
+                                                         OPinv=_shift_invert(W, Am, sigma))
+        except scipy.sparse.linalg.ArpackNoConvergence as exc:  # (a RuntimeError too)
+            raise BSFError(f"eigensolver did not converge for k={k} ({exc})") from None
+        except RuntimeError as exc:  # W − σA singular: σ is an eigenvalue
+            raise BSFError(f"eigensolver failed with sigma={sigma!r} ({exc}); W - sigma*A must "
+                           "be non-singular, choose another shift") from None
+    return evals, evecs
+
+
 def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
                             method: str = "auto") -> Spectrum:
     """Smallest ``k`` eigenpairs of ``W φ = λ A φ`` for any domain (mesh, curve, point cloud).
@@ -215,34 +250,8 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
     Am = sp.diags(a).tocsr()
     chosen = method != "auto"  # a fallback from a solver the user named is worth a warning
     method = _resolve_method(method, n, k)
-    if method == "dense":
-        evals, evecs = scipy.linalg.eigh(W.toarray(), np.diag(a), subset_by_index=[0, k - 1])
-    else:
-        if sigma is None:
-            scale = float(W.diagonal().mean() / a.mean())  # ~ largest eigenvalues' scale
-            sigma = -1e-6 * scale
-        try:
-            evals = None
-            # the block solver needs σ below the spectrum (W − σA positive definite): W is
-            # positive semidefinite, so any σ < 0 is; a user's σ >= 0 goes to ARPACK
-            if method in ("block", "fast") and sigma < 0:
-                try:
-                    evals, evecs, _ = block_lanczos(W, a, k, sigma,
-                                                    tol=FAST_TOL if method == "fast" else 1e-8)
-                except (BSFError, RuntimeError) as exc:  # a missed multiplicity, no
-                    # convergence, or W − σA not positive definite (σ above λ₁): ARPACK
-                    if chosen:
-                        warnings.warn(f"{exc}; falling back to method='lanczos'", stacklevel=2)
-            if evals is None:
-                v0 = np.random.default_rng(0).standard_normal(n)  # fixed start: deterministic
-                evals, evecs = scipy.sparse.linalg.eigsh(W.tocsc(), k=k, M=Am.tocsc(),
-                                                         sigma=sigma, which="LM", v0=v0,
-                                                         OPinv=_shift_invert(W, Am, sigma))
-        except scipy.sparse.linalg.ArpackNoConvergence as exc:  # (a RuntimeError too)
-            raise BSFError(f"eigensolver did not converge for k={k} ({exc})") from None
-        except RuntimeError as exc:  # W − σA singular: σ is an eigenvalue
-            raise BSFError(f"eigensolver failed with sigma={sigma!r} ({exc}); W - sigma*A must "
-                           "be non-singular, choose another shift") from None
+    with one_blas_thread(n < ONE_THREAD_BELOW):  # (_threads: spinning BLAS threads)
+        evals, evecs = _solve(W, a, Am, k, sigma, method, chosen)
     # the eigenvectors are the solvers' own fresh arrays: sorted, normalized and signed in
     # place (at 445K vertices each n × k copy is 357 MB of fresh memory, ~0.5 s to fault in)
     norms = np.sqrt(np.einsum("ij,i,ij->j", evecs, a, evecs))  # NaN / inf propagate here

@@ -206,3 +206,36 @@ def test_bad_values_and_landmarks():
     out = list(transfer_collection(small.source, small.labels, [small.target], k=10,
                                    landmarks=[([0], [10**6])], errors="report"))
     assert isinstance(out[0][1], BSFError) and "target landmarks" in str(out[0][1])
+
+
+def test_host_work_overlaps_the_stages_on_one_blas_thread(monkeypatch):
+    """On a CPU the next target's eigensolve runs while the group before it computes, with
+    one BLAS thread (``_threads``); a target from ``ONE_THREAD_BELOW`` vertices on waits for
+    the group instead and keeps the default threads.  Either way the results are the same."""
+    from threadpoolctl import threadpool_info
+
+    from bsfjax import _collection
+
+    small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
+    targets = [small.target, large.target, small.target]
+    seen, solve = [], _collection.spectrum
+
+    def recording(mesh, k, **kw):
+        if mesh is not small.source:
+            seen.append(max(lib["num_threads"] for lib in threadpool_info()
+                            if lib["user_api"] == "blas"))
+        return solve(mesh, k, **kw)
+
+    monkeypatch.setattr(_collection, "spectrum", recording)
+    kw = dict(method="p2p", k=10, zoomout_samples=300)
+    overlapped = dict(transfer_collection(small.source, small.labels, targets, **kw))
+    default = max(lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas")
+    # (one device: each target is dispatched once prepared, so the next one overlaps it)
+    assert len(jax.local_devices()) > 1 or seen == [default, 1, 1]
+    seen.clear()
+    monkeypatch.setattr(_collection, "ONE_THREAD_BELOW", 0)
+    waited = dict(transfer_collection(small.source, small.labels, targets, **kw))
+    assert seen == [default] * 3
+    for i in range(3):
+        np.testing.assert_array_equal(overlapped[i].p2p, waited[i].p2p)
+        np.testing.assert_array_equal(overlapped[i].labels, waited[i].labels)

@@ -135,6 +135,25 @@ def test_nearest_neighbors_equal_ckdtree(chunk_size):
     np.testing.assert_array_equal(got32[clear], expect[clear, 0])
 
 
+
+@pytest.mark.parametrize("n_valid", [701, 650, 64, 1])
+def test_padded_queries_are_skipped(n_valid):
+    """``_nearest(..., n_valid)`` (a target padded to its size bucket): the real queries get
+    cKDTree's answers, every chunk past them is skipped (answer 0), jitted with ``n_valid``
+    traced (one program for every count)."""
+    from bsfjax._fmap import _nearest
+
+    rng = np.random.default_rng(3)
+    ref = rng.standard_normal((900, 12))
+    qry = ref[rng.integers(1, 900, 701)] + 0.01 * rng.standard_normal((701, 12))
+    expect = cKDTree(ref).query(qry)[1]
+    with jax.enable_x64(True):
+        got = np.asarray(jax.jit(_nearest, static_argnums=2)(ref, qry, 64, n_valid))
+    np.testing.assert_array_equal(got[:n_valid], expect[:n_valid])
+    first_skipped = -(-n_valid // 64) * 64  # the chunk holding the last real query runs whole
+    np.testing.assert_array_equal(got[first_skipped:], 0)
+    np.testing.assert_array_equal(got[n_valid:first_skipped], expect[n_valid:first_skipped])
+
 def test_nearest_neighbors_far_from_origin():
     """Far from the origin, ‖x‖² − 2x·y + ‖y‖² in float32 alone cannot rank neighbours."""
     rng = np.random.default_rng(2)
