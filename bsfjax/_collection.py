@@ -85,8 +85,8 @@ class TargetTransfer(NamedTuple):
     regime: str | None  #: ``"refined"`` only: see :data:`bsfjax.REGIMES`
     n_vertices: int
     mass: np.ndarray  #: ``(n_N,)`` vertex areas of the target (relative: for area shares)
-    #: this target's eigensolve plus its share of the time its group's kernel was dispatched
-    #: and awaited (on an accelerator the kernel runs while the next target's eigensolve does)
+    #: this target's host work (reading, eigensolve) plus its share of the time its group's
+    #: stages were dispatched and awaited (they run while the next target's eigensolve does)
     seconds: float
 
 
