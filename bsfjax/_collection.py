@@ -26,10 +26,9 @@ the transfer):
 
 The eigensolve of each target stays on the host (scipy), as in the single-pair path, and runs
 while the group dispatched before it computes.  On a CPU the two share the cores: the stages'
-own BLAS calls then run on one thread (:mod:`bsfjax._threads`: OpenBLAS's idle threads spin),
-as does the eigensolve of a target below ``ONE_THREAD_BELOW`` vertices; a larger target waits
-for the group first.  Stop 30, eight 5K targets: 0.53–0.55 s per target against 0.62 s one
-after the other (at stop 29, with OpenBLAS spinning beside XLA, overlapping had been slower).
+BLAS calls run on one thread (:mod:`bsfjax._threads`), as does the eigensolve of a target below
+``ONE_THREAD_BELOW`` vertices (a larger one waits for the group).  Eight 5K targets, stop 30:
+0.47–0.52 s per target against 0.62–0.67 s one after the other (docs/benchmarks.md).
 """
 
 from __future__ import annotations

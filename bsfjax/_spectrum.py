@@ -137,7 +137,7 @@ def _shift_invert(W: sp.csr_matrix, Am: sp.csr_matrix, sigma: float):
     return scipy.sparse.linalg.LinearOperator((n, n), matvec=lu.solve, dtype=np.float64)
 
 
-def _solve(W, a, Am, k: int, sigma, method: str, chosen: bool):
+def _eigensolve(W, a, Am, k: int, sigma, method: str, chosen: bool):
     """The solver's ``(evals, evecs)`` (``method`` resolved; ``chosen``: the user named it)."""
     n = W.shape[0]
     if method == "dense":
@@ -251,7 +251,7 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
     chosen = method != "auto"  # a fallback from a solver the user named is worth a warning
     method = _resolve_method(method, n, k)
     with one_blas_thread(n < ONE_THREAD_BELOW):  # (_threads: spinning BLAS threads)
-        evals, evecs = _solve(W, a, Am, k, sigma, method, chosen)
+        evals, evecs = _eigensolve(W, a, Am, k, sigma, method, chosen)
     # the eigenvectors are the solvers' own fresh arrays: sorted, normalized and signed in
     # place (at 445K vertices each n × k copy is 357 MB of fresh memory, ~0.5 s to fault in)
     norms = np.sqrt(np.einsum("ij,i,ij->j", evecs, a, evecs))  # NaN / inf propagate here

@@ -31,13 +31,13 @@ def test_small_eigensolves_run_on_one_blas_thread(monkeypatch):
     """Below ONE_THREAD_BELOW vertices the solver runs on one BLAS thread, from there on with
     the caller's setting; the spectrum is the same either way."""
     seen = []
-    solve = _spectrum._solve
+    solve = _spectrum._eigensolve
 
     def recording(*args):
         seen.append(max(_blas_threads()))
         return solve(*args)
 
-    monkeypatch.setattr(_spectrum, "_solve", recording)
+    monkeypatch.setattr(_spectrum, "_eigensolve", recording)
     mesh = bsfjax.example_pair(levels=1).source
     one = bsfjax.spectrum(mesh, 12, method="lanczos")
     monkeypatch.setattr(_spectrum, "ONE_THREAD_BELOW", 0)
