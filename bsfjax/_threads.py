@@ -14,6 +14,10 @@ blocks at ``n`` ≲ 10⁴), where a second thread gains nothing: the block eigen
 same time on one thread at 5K vertices (0.25–0.26 s) and is ~10 % slower at 28K (1.26 against
 1.14 s), so it keeps the default from :data:`ONE_THREAD_BELOW` vertices on.  The limit is
 `threadpoolctl`'s (restored on exit, so a user's own setting is kept outside these calls).
+OpenBLAS's thread count is one setting for the whole process, and threadpoolctl (≥ 3.8) lets
+one Python thread control it (the first that set a limit, while it lives); in other threads
+the limit is a no-op.  Called from such a thread these functions run on the default threads:
+slower, and an eigensolve's vectors differ in the last digits (1e-12 at 4K vertices).
 """
 
 from __future__ import annotations
