@@ -28,7 +28,7 @@ from ._eigensolver import block_lanczos, default_block, has_cholmod
 from ._errors import BSFError, MeshError
 from ._laplacian import MASS_TYPES, laplacian
 from ._mesh import Mesh, n_components
-from ._threads import ONE_THREAD_BELOW, one_blas_thread
+from ._threads import eigensolve_on_one_thread, one_blas_thread
 
 __all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum", "stack_spectra",
            "unit_area", "map_to_unit_area"]
@@ -250,7 +250,7 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
     Am = sp.diags(a).tocsr()
     chosen = method != "auto"  # a fallback from a solver the user named is worth a warning
     method = _resolve_method(method, n, k)
-    with one_blas_thread(n < ONE_THREAD_BELOW):  # (_threads: spinning BLAS threads)
+    with one_blas_thread(eigensolve_on_one_thread(n)):  # (_threads: spinning BLAS threads)
         evals, evecs = _eigensolve(W, a, Am, k, sigma, method, chosen)
     # the eigenvectors are the solvers' own fresh arrays: sorted, normalized and signed in
     # place (at 445K vertices each n × k copy is 357 MB of fresh memory, ~0.5 s to fault in)

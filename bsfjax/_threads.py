@@ -12,7 +12,8 @@ three stages of a 5K target 0.10 s slower (``docs/benchmarks.md``, stop 30).
 The matrices OpenBLAS sees on these paths are small (``k × k``, or the eigensolver's ``n × b``
 blocks at ``n`` ≲ 10⁴), where a second thread gains nothing: the block eigensolver takes the
 same time on one thread at 5K vertices (0.25–0.26 s) and is ~10 % slower at 28K (1.26 against
-1.14 s), so it keeps the default from :data:`ONE_THREAD_BELOW` vertices on.  The limit is
+1.14 s), so it keeps the default from :data:`ONE_THREAD_BELOW` vertices on, and beside an
+accelerator (:func:`eigensolve_on_one_thread`).  The limit is
 `threadpoolctl`'s (restored on exit, so a user's own setting is kept outside these calls).
 OpenBLAS's thread count is one setting for the whole process, and threadpoolctl (≥ 3.8) lets
 one Python thread control it (the first that set a limit, while it lives); in other threads
@@ -28,10 +29,17 @@ import functools
 import jax
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["one_blas_thread", "on_one_blas_thread", "ONE_THREAD_BELOW"]
+__all__ = ["one_blas_thread", "on_one_blas_thread", "eigensolve_on_one_thread", "ONE_THREAD_BELOW"]
 
 #: Eigensolves of meshes with fewer vertices run on one BLAS thread (see the module doc).
 ONE_THREAD_BELOW = 20_000
+
+
+def eigensolve_on_one_thread(n: int) -> bool:
+    """Whether the eigensolve of ``n`` vertices runs on one BLAS thread: below
+    :data:`ONE_THREAD_BELOW`, when JAX computes on the CPU (beside an accelerator, the host's
+    cores are free for BLAS while the device computes)."""
+    return n < ONE_THREAD_BELOW and jax.default_backend() == "cpu"
 
 
 @functools.lru_cache(maxsize=1)

@@ -6,7 +6,7 @@ import numpy as np
 from threadpoolctl import threadpool_info
 
 import bsfjax
-from bsfjax import _spectrum
+from bsfjax import _spectrum, _threads
 from bsfjax._threads import on_one_blas_thread, one_blas_thread
 
 
@@ -28,8 +28,9 @@ def test_one_blas_thread_limits_every_blas_and_restores():
 
 
 def test_small_eigensolves_run_on_one_blas_thread(monkeypatch):
-    """Below ONE_THREAD_BELOW vertices the solver runs on one BLAS thread, from there on with
-    the caller's setting; the spectrum is the same either way."""
+    """Below ONE_THREAD_BELOW vertices, with JAX on the CPU, the solver runs on one BLAS
+    thread; from there on, or beside an accelerator, with the caller's setting; the spectrum is
+    the same either way."""
     seen = []
     solve = _spectrum._eigensolve
 
@@ -40,9 +41,12 @@ def test_small_eigensolves_run_on_one_blas_thread(monkeypatch):
     monkeypatch.setattr(_spectrum, "_eigensolve", recording)
     mesh = bsfjax.example_pair(levels=1).source
     one = bsfjax.spectrum(mesh, 12, method="lanczos")
-    monkeypatch.setattr(_spectrum, "ONE_THREAD_BELOW", 0)
+    monkeypatch.setattr(_threads, "ONE_THREAD_BELOW", 0)
     default = bsfjax.spectrum(mesh, 12, method="lanczos")
-    assert seen == [1, max(_blas_threads())]
+    monkeypatch.setattr(_threads, "ONE_THREAD_BELOW", 20_000)
+    monkeypatch.setattr(_threads.jax, "default_backend", lambda: "gpu")
+    bsfjax.spectrum(mesh, 12, method="lanczos")
+    assert seen == [1, max(_blas_threads()), max(_blas_threads())]
     np.testing.assert_allclose(one.evals, default.evals, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(np.abs(np.sum(one.evecs * default.evecs * one.mass[:, None], 0)),
                                1.0, atol=1e-8)
