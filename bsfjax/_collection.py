@@ -57,7 +57,7 @@ from ._methods import BSF, GeodesicBalls, Pair, RefinedPullBack, SaturatedHeat, 
 from ._refine import REFINE_EIGENPAIRS
 from ._sampling import Subsample, subsample
 from ._spectrum import Spectrum, spectrum, unit_area, unit_area_pair
-from ._threads import ONE_THREAD_BELOW, one_blas_thread
+from ._threads import eigensolve_on_one_thread, one_blas_thread
 from ._validate import check_int, compact_labels
 
 __all__ = ["transfer_collection", "TargetTransfer", "size_bucket", "BUCKET_FACTORS"]
@@ -551,8 +551,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     share = process_share(range(len(targets)))
     read: dict[int, Mesh] = {}  # targets of this process the scan has read, handed to prepare
     merged = _merged_sizes(targets, lm_of, n_m, read, share) if pad else {}
-    # The group dispatched last is collected after the next target's host work (module doc):
-    # on a CPU, a target large enough for a multithreaded eigensolve waits for it instead.
+    # the group in flight is collected after the next target's host work (module doc)
     in_flight = None
     cpu = jax.default_backend() == "cpu"
     for i in share:
@@ -561,7 +560,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             mesh = read.pop(i) if i in read else _as_mesh(targets[i])
         except (BSFError, ValueError, OSError) as exc:
             mesh = exc  # (reported below)
-        if in_flight is not None and cpu and getattr(mesh, "n_vertices", 0) >= ONE_THREAD_BELOW:
+        if in_flight is not None and cpu and isinstance(mesh, Mesh) \
+                and not eigensolve_on_one_thread(mesh.n_vertices):  # multithreaded: wait
             yield from finish(in_flight)
             in_flight = None
         try:

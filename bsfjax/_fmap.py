@@ -170,7 +170,7 @@ def _nearest(ref: jax.Array, qry: jax.Array, chunk: int, n_valid=None) -> jax.Ar
         skip = lambda q: jnp.zeros(q.shape[0], jnp.int32)  # noqa: E731
         out = lax.map(lambda a: lax.cond(a[0] * chunk < n_valid, one_chunk, skip, a[1]),
                       (jnp.arange(n_chunks), chunks))
-    return out.reshape(-1)[:n_q].astype(jnp.int32)
+    return out.reshape(-1)[:n_q]
 
 
 def _to_p2p(C, evecs_m, evecs_n, chunk: int, adjoint: bool, n_valid=None):

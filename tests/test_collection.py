@@ -214,7 +214,7 @@ def test_host_work_overlaps_the_stages_on_one_blas_thread(monkeypatch):
     the group instead and keeps the default threads.  Either way the results are the same."""
     from threadpoolctl import threadpool_info
 
-    from bsfjax import _collection
+    from bsfjax import _collection, _threads
 
     small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
     targets = [small.target, large.target, small.target]
@@ -233,7 +233,7 @@ def test_host_work_overlaps_the_stages_on_one_blas_thread(monkeypatch):
     # (one device: each target is dispatched once prepared, so the next one overlaps it)
     assert len(jax.local_devices()) > 1 or seen == [default, 1, 1]
     seen.clear()
-    monkeypatch.setattr(_collection, "ONE_THREAD_BELOW", 0)
+    monkeypatch.setattr(_threads, "ONE_THREAD_BELOW", 0)
     waited = dict(transfer_collection(small.source, small.labels, targets, **kw))
     assert seen == [default] * 3
     for i in range(3):
