@@ -8,8 +8,9 @@ import pytest
 import bsfjax as bj
 from bsfjax.experiments import reproduce
 from bsfjax.experiments._datasets import load_dataset
-from bsfjax.experiments.segmentation import (label_metrics, load_segmentation, report,
-                                             segmentation_experiment, shape_labels)
+from bsfjax.experiments.segmentation import (K_SPECTRA, label_metrics, load_segmentation,
+                                             report, segmentation_experiment,
+                                             segmentation_pair, shape_labels)
 
 from .conftest import DATA, data_path
 
@@ -79,6 +80,34 @@ def test_run_on_the_example_pair(tmp_path):
     assert "| default | refined |" in rep.markdown
     png = rep.figure(tmp_path / "seg.png")
     assert png.stat().st_size > 1000
+
+
+def test_one_pair_is_a_row_of_the_experiment(tmp_path):
+    """``segmentation_pair`` (what the benchmark's decimated targets run) gives the rows the
+    experiment gives for the same pair, and names a method or map it does not know."""
+    folder, seg = _example_folder(tmp_path)
+    ds = load_dataset(folder)
+    i, j = ds.pairs(1, 0)[0]
+    kw = dict(methods=("p2p", "refined"), maps=("default", "truth"))
+    rows = segmentation_experiment(ds, segmentation=seg, pair_list=[(i, j)], k=20,
+                                   progress=False, keep_labels=0, **kw)
+    template, _ = load_segmentation(seg)
+    src, tgt = ds.shapes[i], ds.shapes[j]
+    sm, sn = (bj.spectrum(e.mesh, min(K_SPECTRA, e.n_vertices - 1)) for e in (src, tgt))
+    alone = segmentation_pair(sm, sn, (src.mesh, tgt.mesh), shape_labels(ds, i, template),
+                              shape_labels(ds, j, template), ds.ground_truth(i, j), k=20,
+                              names=(src.name, tgt.name), **kw)
+    drop = lambda r: {k: v for k, v in r.items() if k != "seconds"}  # noqa: E731
+    assert [drop(r) for r in alone] == [drop(r) for r in rows]
+    assert [(r["map"], r["method"]) for r in alone] == [
+        ("default", "p2p"), ("default", "refined"), ("truth", "p2p"), ("truth", "refined")]
+    assert alone[2]["accuracy"] == pytest.approx(100)
+    with pytest.raises(bj.BSFError, match="methods must be among"):
+        segmentation_pair(sm, sn, (src.mesh, tgt.mesh), template, template, ds.ground_truth(i, j),
+                          methods=("p2p", "bogus"))
+    with pytest.raises(bj.BSFError, match="maps must be among"):
+        segmentation_pair(sm, sn, (src.mesh, tgt.mesh), template, template, ds.ground_truth(i, j),
+                          maps=("exact",))
 
 
 def test_reproduce_needs_the_segmentation(tmp_path):

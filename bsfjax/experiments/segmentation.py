@@ -37,8 +37,8 @@ from .._spectrum import spectrum
 from ._datasets import Dataset
 from ._io import Report, pivot_markdown
 
-__all__ = ["segmentation_experiment", "load_segmentation", "shape_labels", "label_metrics",
-           "MAPS", "METHODS"]
+__all__ = ["segmentation_experiment", "segmentation_pair", "load_segmentation", "shape_labels",
+           "label_metrics", "MAPS", "METHODS"]
 
 DEFAULT_KS = (30,)
 DESCRIPTION = ("Segmentation transfer (not in the paper): a template's part labelling carried "
@@ -168,6 +168,15 @@ def _maps(sm, sn, gt, k: int, landmarks, meshes) -> dict:
     return {"default": (d.C, d.p2p), "crude": (c.C, c.p2p), "truth": (C_gt, gt)}
 
 
+def _check_choices(methods, maps) -> None:
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise BSFError(f"methods must be among {tuple(METHODS)}, got {bad}")
+    bad = [m for m in maps if m not in MAPS]
+    if bad:
+        raise BSFError(f"maps must be among {MAPS}, got {bad}")
+
+
 def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k: int = 30,
                             methods=tuple(METHODS), maps=MAPS, seed: int = 0, cache_dir=None,
                             pair_list=None, keep_labels: int = 1,
@@ -191,12 +200,7 @@ def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k
         "iou_mean", "iou_worst", "border_accuracy", "seconds", "regime"}``.
     """
     template, _ = load_segmentation(segmentation)
-    bad = [m for m in methods if m not in METHODS]
-    if bad:
-        raise BSFError(f"methods must be among {tuple(METHODS)}, got {bad}")
-    bad = [m for m in maps if m not in MAPS]
-    if bad:
-        raise BSFError(f"maps must be among {MAPS}, got {bad}")
+    _check_choices(methods, maps)
     ids = list(pair_list) if pair_list is not None else dataset.pairs(pairs, seed)
     rows = []
     for n_pair, (i, j) in enumerate(tqdm(ids, desc="segmentation", disable=not progress)):
@@ -204,28 +208,52 @@ def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k
         k_spec = min(K_SPECTRA, src.n_vertices - 1, tgt.n_vertices - 1)
         sm = spectrum(src.mesh, k_spec, cache_dir=cache_dir)
         sn = spectrum(tgt.mesh, k_spec, cache_dir=cache_dir)
-        lab_m, lab_n = shape_labels(dataset, i, template), shape_labels(dataset, j, template)
-        gt = dataset.ground_truth(i, j)
-        lm_src = np.asarray(farthest_point_sampling(src.mesh, N_LANDMARKS, seed=seed))
-        landmarks = (lm_src, gt_inverse(gt, lm_src, tgt.mesh, src.mesh))
-        all_maps = _maps(sm, sn, gt, k, landmarks, (src.mesh, tgt.mesh))
-        # "refined" continues on the samples the default map's ZoomOut used, whatever the map
-        samples = (subsample(src.mesh, ZOOMOUT_SAMPLES), subsample(tgt.mesh, ZOOMOUT_SAMPLES))
-        for map_name in maps:
-            C, p2p = all_maps[map_name]
-            for name in methods:
-                t0 = time.perf_counter()
-                method, options = METHODS[name]
-                res = transfer_labels(sm, sn, lab_m, method=method, C=C, p2p=p2p,
-                                      mesh=src.mesh, samples=samples, **options)
-                sec = time.perf_counter() - t0
-                row = {"source": src.name, "target": tgt.name, "kind": _kind(src.name, tgt.name),
-                       "map": map_name, "method": name,
-                       **label_metrics(res.labels, lab_n, np.asarray(sn.mass), tgt.mesh),
-                       "seconds": round(sec, 3), "regime": res.regime or ""}
-                if n_pair < keep_labels:
-                    row.update(_labels=res.labels, _truth=lab_n, _mesh=tgt.mesh)
-                rows.append(row)
+        rows += segmentation_pair(
+            sm, sn, (src.mesh, tgt.mesh), shape_labels(dataset, i, template),
+            shape_labels(dataset, j, template), dataset.ground_truth(i, j), k=k,
+            methods=methods, maps=maps, seed=seed, names=(src.name, tgt.name),
+            keep_labels=n_pair < keep_labels)
+    return rows
+
+
+def segmentation_pair(sm, sn, meshes, labels_m: np.ndarray, labels_n: np.ndarray,
+                      gt: np.ndarray, *, k: int = 30, methods=tuple(METHODS), maps=MAPS,
+                      seed: int = 0, names=("source", "target"),
+                      keep_labels: bool = False) -> list[dict]:
+    """One pair of :func:`segmentation_experiment`: every method through every map.
+
+    Arguments:
+        sm, sn: the pair's spectra (``K_SPECTRA`` eigenpairs, or fewer on small meshes).
+        meshes: ``(source mesh, target mesh)``.
+        labels_m, labels_n: the source's labels and the target's true labels.
+        gt: the ground-truth point map (target vertex → source vertex).
+        k, methods, maps, seed: as in :func:`segmentation_experiment`.
+        names: the row's ``source`` and ``target``.
+        keep_labels: keep the per-vertex labels in the rows (for the figure).
+    """
+    _check_choices(methods, maps)
+    src_mesh, tgt_mesh = meshes
+    lm_src = np.asarray(farthest_point_sampling(src_mesh, N_LANDMARKS, seed=seed))
+    landmarks = (lm_src, gt_inverse(gt, lm_src, tgt_mesh, src_mesh))
+    all_maps = _maps(sm, sn, gt, k, landmarks, meshes)
+    # "refined" continues on the samples the default map's ZoomOut used, whatever the map
+    samples = (subsample(src_mesh, ZOOMOUT_SAMPLES), subsample(tgt_mesh, ZOOMOUT_SAMPLES))
+    rows = []
+    for map_name in maps:
+        C, p2p = all_maps[map_name]
+        for name in methods:
+            t0 = time.perf_counter()
+            method, options = METHODS[name]
+            res = transfer_labels(sm, sn, labels_m, method=method, C=C, p2p=p2p,
+                                  mesh=src_mesh, samples=samples, **options)
+            sec = time.perf_counter() - t0
+            row = {"source": names[0], "target": names[1], "kind": _kind(*names),
+                   "map": map_name, "method": name,
+                   **label_metrics(res.labels, labels_n, np.asarray(sn.mass), tgt_mesh),
+                   "seconds": round(sec, 3), "regime": res.regime or ""}
+            if keep_labels:
+                row.update(_labels=res.labels, _truth=labels_n, _mesh=tgt_mesh)
+            rows.append(row)
     return rows
 
 
