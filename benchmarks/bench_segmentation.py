@@ -73,8 +73,8 @@ def decimated(data: Path, seg: Path, out: Path, cache) -> int:
         for r in part:
             r["reduction"] = red
         rows += part
-        md += [f"# Targets decimated by {100 * red:.0f} % ({min(sizes)}–{max(sizes)} vertices)",
-               "",
+        span = f"{min(sizes)}" if min(sizes) == max(sizes) else f"{min(sizes)}–{max(sizes)}"
+        md += [f"# Targets decimated by {100 * red:.0f} % ({span} vertices)", "",
                report(part, (30,)).markdown, ""]
     write_csv(rows, out / "segmentation_decimated.csv")
     (out / "segmentation_decimated.md").write_text("\n".join(md))
