@@ -56,7 +56,7 @@ from ._methods import BSF, GeodesicBalls, Pair, RefinedPullBack, SaturatedHeat, 
     SpectralProjection, as_method, method_name
 from ._refine import REFINE_EIGENPAIRS
 from ._sampling import Subsample, subsample
-from ._spectrum import Spectrum, spectrum, unit_area, unit_area_pair
+from ._spectrum import Spectrum, map_to_unit_area, spectrum, unit_area, unit_area_pair
 from ._threads import eigensolve_on_one_thread, one_blas_thread
 from ._validate import check_int, compact_labels
 
@@ -156,13 +156,13 @@ def _dispatch(cfg: _Config, replicated: list, items: list, source_ops: list,
 
 
 def _spectra(rep, it):
-    """The pair's spectra: the source at the pair's common unit-area factor ``it["ratio"]`` (a
-    power of 4 times its own, exact in floating point, as :func:`bsfjax.unit_area_pair`)."""
-    return _source_spectrum(rep, it["ratio"]), Spectrum(it["evals"], it["evecs"], it["mass"])
+    """The pair's spectra, both at one area near 1 (:func:`bsfjax.unit_area_pair`: the source
+    at its own unit-area factor, whatever the target)."""
+    return _source_spectrum(rep), Spectrum(it["evals"], it["evecs"], it["mass"])
 
 
-def _source_spectrum(rep, r):
-    return Spectrum(rep["evals"] * r, rep["evecs"] * jnp.sqrt(r), rep["mass"] / r)
+def _source_spectrum(rep):
+    return Spectrum(rep["evals"], rep["evecs"], rep["mass"])
 
 
 def _descriptors(s: Spectrum, lm, cfg: _Config):
@@ -189,12 +189,11 @@ def _geometry_of(arrays, cfg: _Config) -> _Geometry | None:
     return _Geometry(arrays["faces"], arrays["K"], arrays["third_area"])
 
 
-def _source_ops_stage(rep, r, lm_m, *, cfg: _Config):
+def _source_ops_stage(rep, lm_m, *, cfg: _Config):
     """The source's share of the estimation problem (:func:`_shape_ops`: descriptors and their
-    operators) at unit-area factor ``r`` with source landmarks ``lm_m``: once for all the
-    targets that share them, not once per target (0.06 s of the problem stage's 0.10 s on a
-    5.5K-vertex target)."""
-    src = _source_spectrum(rep, r)
+    operators) with source landmarks ``lm_m``: once for all the targets that share them, not
+    once per target (0.06 s of the problem stage's 0.10 s on a 5.5K-vertex target)."""
+    src = _source_spectrum(rep)
     return _shape_ops(_shape(src, _geometry_of(rep, cfg), cfg, _descriptors(src, lm_m, cfg)),
                       normalize_descriptors=True)
 
@@ -272,7 +271,7 @@ class _Target(NamedTuple):
     index: int
     mesh: Mesh
     spectrum: Spectrum  # unit-area-pair scaled, float64
-    ratio: float
+    factors: tuple  # (a_M, a_N) of bsfjax.unit_area_pair: C back to the given bases
     landmarks: tuple | None
     samples: Subsample | None  # ZoomOut's
     seconds: float
@@ -346,7 +345,7 @@ def _bucket_key(t: _Target, pad: bool, orient: bool, n_samples: int | None,
 def _item_arrays(t: _Target, n_b: int, m_b: int, s_b: int) -> dict:
     s = t.spectrum
     out = {"evals": np.asarray(s.evals), "evecs": _pad_rows(np.asarray(s.evecs), n_b),
-           "mass": _pad_rows(np.asarray(s.mass), n_b), "ratio": np.float64(t.ratio)}
+           "mass": _pad_rows(np.asarray(s.mass), n_b)}
     if t.samples is not None:
         out["zo_indices"] = _pad_rows(t.samples.indices, s_b)
         out["zo_cells"] = _pad_rows(t.samples.cells, n_b)
@@ -480,25 +479,25 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                            f"for {k_spec} eigenpairs")
         lm = _check_landmarks(lm_of(i), n_m, mesh.n_vertices)
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
-        _, a, scaled, _ = unit_area_pair(src_spec, spec)  # the pair's common factor
+        _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
-        return _Target(i, mesh, scaled, float(a) / a0, lm, sub, time.perf_counter() - t)
+        return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
     ops_cache: dict[tuple, object] = {}  # the source's share of the problem (_source_ops_stage)
 
     def source_ops(cfg: _Config, tg: _Target, i: int):
-        """The source's operators for target ``tg`` on device ``i``: one computation per unit-
-        area factor and source landmarks (kept for the last few of them)."""
+        """The source's operators for target ``tg`` on device ``i``: one computation per set
+        of source landmarks (kept for the last few of them)."""
         lm = None if tg.landmarks is None else np.asarray(tg.landmarks[0], np.int32)
-        key = (cfg, tg.ratio, None if lm is None else lm.tobytes(), i)
+        key = (cfg, None if lm is None else lm.tobytes(), i)
         if key not in ops_cache:
             if len(ops_cache) >= 4 * len(devices) * batch:  # per-target source landmarks
                 ops_cache.pop(next(iter(ops_cache)))
-            r, lm = jax.device_put(_cast_tree((np.float64(tg.ratio), lm)), devices[i])
+            lm = jax.device_put(lm, devices[i])
             ops_stage = _stages_for(cfg, batch > 1)[0]  # (never batched: once per key)
-            ops_cache[key] = ops_stage(on_device[cfg.n_landmarks][i], r, lm)
+            ops_cache[key] = ops_stage(on_device[cfg.n_landmarks][i], lm)
         return ops_cache[key]
 
     def launch(key, group: list[_Target]):
@@ -542,7 +541,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 conf = float(np.sum(mass * best) / np.sum(mass))
                 regime = _regime(agree, conf) if refined else None
             yield tg.index, TargetTransfer(
-                labels=lab, values=vals_j, p2p=p2p, C=o["C"].astype(np.float64),
+                labels=lab, values=vals_j, p2p=p2p,
+                C=map_to_unit_area(o["C"].astype(np.float64), *tg.factors, inverse=True),
                 map_energy=float(o["energy"]), unassigned_share=share_un,
                 agreement=agree, confidence=conf, regime=regime, n_vertices=n, mass=mass,
                 seconds=tg.seconds + share)

@@ -70,7 +70,7 @@ import optimistix as optx
 from ._validate import check_finite
 from ._errors import BSFError
 from ._mesh import Mesh
-from ._spectrum import Spectrum
+from ._spectrum import Spectrum, map_to_unit_area, unit_area_pair
 
 __all__ = ["estimate_fmap", "FmapWeights", "fmap_energy", "LAPLACIAN_MASKS", "ORIENTATIONS"]
 
@@ -539,19 +539,24 @@ def estimate_fmap(source_spectrum: Spectrum, target_spectrum: Spectrum, source_d
                       np.shape(source_spectrum.evecs), np.shape(target_spectrum.evecs))
     if not isinstance(max_steps, (int, np.integer)) or max_steps < 2:
         raise BSFError(f"max_steps must be an integer >= 2, got {max_steps!r}")
+    # the two shapes at one area (bsfjax.unit_area_pair): the Laplacian term compares their
+    # eigenvalues, so a target in millimetres is matched as the same shape in metres
+    source_spectrum, am, target_spectrum, an = unit_area_pair(source_spectrum, target_spectrum)
     sm, sn = _shapes(source_spectrum, target_spectrum, km, kn, dm, dn, gm, gn)
-    return _estimate_jit(sm, sn, w, float(gamma), lap_kind=laplacian,
-                         normalize_descriptors=bool(normalize_descriptors),
-                         normalize_weights=bool(normalize_weights),
-                         orient_sign=1.0 if orientation == "preserving" else -1.0,
-                         max_steps=int(max_steps), batched=batched)
+    C = _estimate_jit(sm, sn, w, float(gamma), lap_kind=laplacian,
+                      normalize_descriptors=bool(normalize_descriptors),
+                      normalize_weights=bool(normalize_weights),
+                      orient_sign=1.0 if orientation == "preserving" else -1.0,
+                      max_steps=int(max_steps), batched=batched)
+    return map_to_unit_area(C, am, an, inverse=True)
 
 
 def fmap_energy(C, source_spectrum: Spectrum, target_spectrum: Spectrum, source_descr,
                 target_descr, *, weights=None, laplacian: str = "resolvent", gamma: float = 0.5,
                 source_mesh=None, target_mesh=None, orientation: str = "preserving",
                 normalize_descriptors: bool = True, normalize_weights: bool = True) -> jax.Array:
-    """The energy E(C) that :func:`estimate_fmap` minimizes (single pair), for diagnostics."""
+    """The energy E(C) that :func:`estimate_fmap` minimizes (single pair), for diagnostics: of
+    ``C`` between the two shapes at one area, as there."""
     shape = np.shape(C)
     if len(shape) != 2:
         raise BSFError(f"C must be a (k_target, k_source) matrix, got shape {shape}")
@@ -563,6 +568,8 @@ def fmap_energy(C, source_spectrum: Spectrum, target_spectrum: Spectrum, source_
     w = _weights_array(weights)
     gm, gn = _options(laplacian, gamma, orientation, w, source_mesh, target_mesh,
                       np.shape(source_spectrum.evecs), np.shape(target_spectrum.evecs))
+    source_spectrum, am, target_spectrum, an = unit_area_pair(source_spectrum, target_spectrum)
+    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an)
     sm, sn = _shapes(source_spectrum, target_spectrum, km, kn, dm, dn, gm, gn)
     return _energy_jit(C, sm, sn, w, float(gamma), lap_kind=laplacian,
                        normalize_descriptors=bool(normalize_descriptors),

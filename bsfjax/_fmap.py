@@ -257,6 +257,12 @@ def fmap_to_p2p(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *,
                 adjoint: bool = False, chunk_size: int | None = None) -> jax.Array:
     """The point map of a functional map: nearest neighbours in the aligned spectral embedding.
 
+    Each target vertex ``y`` takes the source vertex ``x`` minimizing ``‖Φ_M(x) Cᵀ − Φ_N(y)‖``
+    (or ``‖Φ_M(x) − Φ_N(y) C‖`` with ``adjoint``) between the two shapes rescaled to one area
+    (:func:`bsfjax.unit_area_pair`; in the given bases, ``Φ_M Cᵀ·S_M/S_N`` against ``Φ_N``):
+    the comparison presumes an orthogonal ``C``, which an isometry has between shapes of equal
+    area, so the point map does not depend on either mesh's units.
+
     Args:
         C: ``(k_N, k_M)`` functional map from source ``M`` to target ``N``.  The first ``k_M``
             (``k_N``) eigenvectors of the source (target) spectrum are used.
@@ -273,12 +279,11 @@ def fmap_to_p2p(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *,
     _check_spectrum(target_spectrum, "target_spectrum")
     kn, km = _check_fmap(C, source_spectrum.k, target_spectrum.k)
     chunk = _chunk_for(source_spectrum.n_vertices, target_spectrum.n_vertices, chunk_size)
-    # unit scale before the float32 cast (see fmap_from_p2p)
+    # the two shapes at one area near 1 before the float32 cast (bsfjax.unit_area_pair): the
+    # default comparison presumes an orthogonal C, which an isometry has only at equal areas
+    # (the adjoint one is invariant to the areas: Φ_N C and Φ_M both scale by √a_M)
     sm, am, sn, an = unit_area_pair(source_spectrum, target_spectrum)
-    # nearest neighbours are invariant to one common factor: Φ_N vs Φ_M Cᵀ both times √S_N
-    # (C·√(S_N/S_M) with the unit-area Φ_M), Φ_N C vs Φ_M both times √S_M (adjoint)
-    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an,
-                         inverse=not adjoint)
+    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an)
     return _fmap_to_p2p_jit(C, sm.evecs[:, :km], sn.evecs[:, :kn],
                             chunk=chunk, adjoint=bool(adjoint))
 
@@ -323,7 +328,8 @@ def zoomout(C, source_spectrum: Spectrum, target_spectrum: Spectrum, k, *, step:
 
     Each iteration converts the current map to a point map (:func:`fmap_to_p2p`) and back to a
     functional map (:func:`fmap_from_p2p`) ``step`` basis functions larger, until the size is
-    ``k``; the last step is clipped.  One jitted ``fori_loop``.
+    ``k``; the last step is clipped.  One jitted ``fori_loop``, on the two shapes at one area
+    (as :func:`fmap_to_p2p`; the result is converted back to the given bases).
 
     Args:
         C: ``(k₀_N, k₀_M)`` initial functional map.
@@ -366,16 +372,19 @@ def zoomout(C, source_spectrum: Spectrum, target_spectrum: Spectrum, k, *, step:
     n_iter = max(math.ceil((kn - kn0) / step), math.ceil((km - km0) / step))
     sizes_n = _size_schedule(int(kn0), int(kn), int(step), n_iter)
     sizes_m = _size_schedule(int(km0), int(km), int(step), n_iter)
-    evecs_m, evecs_n, mass_n = (source_spectrum.evecs[:, :km], target_spectrum.evecs[:, :kn],
-                                target_spectrum.mass)
+    # the shapes at one area, as fmap_to_p2p: its nearest neighbours presume an orthogonal C
+    sm, am, sn, an = unit_area_pair(source_spectrum, target_spectrum)
+    evecs_m, evecs_n, mass_n = sm.evecs[:, :km], sn.evecs[:, :kn], sn.mass
     if samples is not None:
         sub_m, sub_n = _check_samples(samples, source_spectrum.n_vertices,
                                       target_spectrum.n_vertices)
         mass_n = sub_n.weights(jnp.asarray(mass_n))
         evecs_m, evecs_n = jnp.asarray(evecs_m)[sub_m.indices], jnp.asarray(evecs_n)[sub_n.indices]
     chunk = _chunk_for(evecs_m.shape[0], evecs_n.shape[0], chunk_size)
-    return _zoomout_jit(C, evecs_m, evecs_n, mass_n, sizes_n=sizes_n, sizes_m=sizes_m,
-                        chunk=chunk, adjoint=bool(adjoint))
+    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an)
+    out = _zoomout_jit(C, evecs_m, evecs_n, mass_n, sizes_n=sizes_n, sizes_m=sizes_m,
+                       chunk=chunk, adjoint=bool(adjoint))
+    return map_to_unit_area(out, am, an, inverse=True)
 
 
 def _check_samples(samples, n_m: int, n_n: int):
@@ -433,7 +442,9 @@ def icp_refine(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *, n_ite
     Each of ``n_iter`` iterations: point map of C, its functional map C', then
     C ← argmin_{OᵀO = I} ‖O − C'‖ = U Vᵀ.  With ``bijective=True`` the point map ``M → N`` of the
     inverse map Cᵀ is computed as well and its (transposed) functional map averaged with C'
-    before the projection, so both directions must agree.  One jitted ``fori_loop``.
+    before the projection, so both directions must agree.  One jitted ``fori_loop``, on the two
+    shapes at one area (:func:`bsfjax.unit_area_pair`): in the given bases the result is
+    orthogonal times ``√(S_N/S_M)``.
     """
     _check_spectrum(source_spectrum, "source_spectrum")
     _check_spectrum(target_spectrum, "target_spectrum")
@@ -442,6 +453,9 @@ def icp_refine(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *, n_ite
         raise BSFError(f"n_iter must be a non-negative integer, got {n_iter!r}")
     n_m, n_n = source_spectrum.n_vertices, target_spectrum.n_vertices
     chunk = _chunk_for(max(n_m, n_n), max(n_m, n_n), chunk_size)
-    return _icp_jit(C, source_spectrum.evecs[:, :km], target_spectrum.evecs[:, :kn],
-                    source_spectrum.mass, target_spectrum.mass, n_iter=int(n_iter), chunk=chunk,
-                    adjoint=bool(adjoint), bijective=bool(bijective))
+    # orthogonal between the two shapes at one area (as fmap_to_p2p), back in the given bases
+    sm, am, sn, an = unit_area_pair(source_spectrum, target_spectrum)
+    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an)
+    out = _icp_jit(C, sm.evecs[:, :km], sn.evecs[:, :kn], sm.mass, sn.mass, n_iter=int(n_iter),
+                   chunk=chunk, adjoint=bool(adjoint), bijective=bool(bijective))
+    return map_to_unit_area(out, am, an, inverse=True)

@@ -56,12 +56,24 @@ def _relative_error(reference, estimate, mass):
     f = f / s[..., None]
     d = e / s[..., None] - f
     w = w / ws[..., None]
-    num = jnp.sqrt(jnp.sum(w * d * d, axis=-1))
-    den = jnp.sqrt(jnp.sum(w * f * f, axis=-1))
-    pos = den > 0
+    # f may still be tiny beside f̃ (f = 1e-30, f̃ = 1): both are divided by f's own largest
+    # entry too, or the squares of f would underflow to a spurious zero norm (|d| ≤ 2 and
+    # |f| ≥ the smallest normal number after the flush below, so d / sf stays in range)
+    sf = jnp.max(jnp.abs(f), axis=-1)
+    pos = sf > 0
+    sf = jnp.where(pos, sf, 1.0)[..., None]
+    ratio = _norm(d / sf, w) / jnp.where(pos, _norm(f / sf, w), 1.0)
     # ‖f‖_A = 0: the ratio is undefined; report the absolute error ‖f̃‖_A instead (0 when the
-    # estimate is also zero), never 0/0 = NaN.
-    return jnp.where(pos, num / jnp.where(pos, den, 1.0), num * s * jnp.sqrt(ws))
+    # estimate is also zero), never 0/0 = NaN; a ratio beyond the dtype's range is its maximum
+    return jnp.where(pos, jnp.minimum(ratio, jnp.finfo(dt).max),
+                     _norm(d, w) * s * jnp.sqrt(ws))
+
+
+def _norm(x, w):
+    """``‖x‖_A``, scaled by the largest entry of ``x``: no square overflows or underflows."""
+    m = jnp.max(jnp.abs(x), axis=-1)
+    m = jnp.where(m > 0, m, 1.0)
+    return m * jnp.sqrt(jnp.sum(w * (x / m[..., None]) ** 2, axis=-1))
 
 
 def relative_error(reference, estimate, mass) -> jax.Array:
@@ -82,7 +94,9 @@ def relative_error(reference, estimate, mass) -> jax.Array:
         ``(...)`` errors, one per function, in the promoted float dtype.  It is the **square
         root** of the ratio of integrals (square it for the paper's ratio form).  Zero-norm
         rule: where ``‖f‖_A = 0`` the result is the absolute error ``‖f̃‖_A`` (so ``0`` when both
-        vanish), never NaN or inf.
+        vanish), never NaN or inf.  ``f`` counts as zero when it is below the working dtype's
+        smallest normal number relative to ``max(|f|, |f̃|)`` (1e-38 in float32: ``f = 1e-205``
+        beside ``f̃ = 1``); a ratio beyond the dtype's range is its largest value.
 
     Raises:
         BSFError: non-numeric / non-finite inputs, mismatched last axes, negative or all-zero
@@ -117,7 +131,12 @@ def relative_error(reference, estimate, mass) -> jax.Array:
     s = pow2_scale(np.maximum(np.max(np.abs(f), axis=-1), np.max(np.abs(e), axis=-1)))
     ws = pow2_scale(np.max(w, axis=-1), even=True)  # exact rescalings (powers of 2 and 4)
     f, e, w = f / s[..., None], e / s[..., None], w / ws[..., None]
+    # XLA's CPU flushes subnormals to zero: so do we, so that the zero-norm rule below sees
+    # the f the computation sees
+    tiny = np.finfo(dt).tiny
+    f, e = (np.where(np.abs(x) < tiny, 0.0, x) for x in (f, e))
     out = _relative_error(jnp.asarray(f, dt), jnp.asarray(e, dt), jnp.asarray(w, dt))
-    zero = np.sum(w * f * f, axis=-1) == 0  # the absolute-error rule: restore its units
+    # the absolute-error rule where f is zero in the working dtype: restore its units
+    zero = ~np.any(f != 0, axis=-1)
     unit = np.minimum(np.where(zero, s * np.sqrt(ws), 1.0), np.finfo(dt).max)
     return out * jnp.asarray(unit, dt)

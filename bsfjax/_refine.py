@@ -221,7 +221,7 @@ def refine_point_maps(source: Spectrum, target: Spectrum, p2p, *, k_start: int =
     sizes = sizes_for(source.k, target.k, k_start, k_max, step)
     if samples is not None:
         samples = _check_samples(samples, source.n_vertices, target.n_vertices)
-    # unit magnitudes on the host in float64 before the float32 cast, one factor for both
+    # the two shapes at one area near 1, on the host in float64 before the float32 cast
     source, _, target, _ = unit_area_pair(source, target)
     return _refine_jit(jnp.asarray(p), source, target, samples, sizes=sizes,
                        n_keep=min(n_keep, len(sizes)), weight=float(descriptor_weight),

@@ -426,15 +426,18 @@ def stack_spectra(spectra) -> Spectrum:
 
 
 def unit_area_pair(source: Spectrum, target: Spectrum):
-    """``(source', a, target', a)``: both spectra rescaled as :func:`unit_area` but by one
-    common power of 4 (nearest the geometric mean of the two areas, per pair of a stack).
+    """``(source', a_M, target', a_N)``: the two spectra rescaled to one area near 1, the
+    source as :func:`unit_area` does (``a_M`` the power of 4 nearest ``S_M``), the target by
+    ``a_N = a_M·S_N/S_M`` (per pair of a stack).
 
-    What a pair-level computation (ZoomOut, nearest neighbours in ``Φ_M Cᵀ`` against ``Φ_N``)
-    needs: the two bases keep their relative scale, so the result is the one of the unscaled
-    shapes bit for bit, while the magnitudes are near 1 before any float32 cast.  Per-shape
-    factors would change that relative scale by up to 4× when the two areas round to
-    different powers (areas 1.99 and 2.01).  Returns ``(source, None, target, None)`` for traced
-    arrays or areas that are not finite and positive.
+    What a pair-level computation needs: descriptor and Laplacian-commutativity terms compare
+    the two shapes' eigenvalues and descriptors, and ZoomOut's nearest neighbours (``Φ_M Cᵀ``
+    against ``Φ_N``) presume an orthogonal ``C``, which an isometry has only between shapes of
+    one area.  So a target in millimetres and a source in metres are matched as two shapes in
+    metres (until stop 31 one common factor kept their relative scale, and such a pair got
+    2 % of the SMPL parts right).  Two shapes of equal area keep exact power-of-4 factors: the
+    results of the unscaled shapes bit for bit.  Returns ``(source, None, target, None)`` for
+    traced arrays or areas that are not finite and positive.
     """
     import jax
 
@@ -446,8 +449,9 @@ def unit_area_pair(source: Spectrum, target: Spectrum):
         return source, None, target, None
     from ._validate import pow2_scale
 
-    a = np.asarray(pow2_scale(np.sqrt(areas[0] * areas[1]), even=True))
-    return _rescaled(source, a), a, _rescaled(target, a), a
+    a_m = np.asarray(pow2_scale(areas[0], even=True))
+    a_n = a_m * (areas[1] / areas[0])  # = a_m, exactly, for equal areas
+    return _rescaled(source, a_m), a_m, _rescaled(target, a_n), a_n
 
 
 def _rescaled(spec: Spectrum, a) -> Spectrum:

@@ -58,11 +58,12 @@ def one_blas_thread(active: bool = True):
 
 
 def on_one_blas_thread(fn):
-    """Run ``fn`` (which returns host arrays, so its JAX programs have finished) on one BLAS
-    thread when JAX runs on the CPU."""
+    """Run ``fn`` on one BLAS thread when JAX runs on the CPU, its result awaited inside (the
+    LAPACK calls of JAX programs still running after the return would see the default): so
+    every public route to a computation sees the same threads and gives the same numbers."""
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         with one_blas_thread(jax.default_backend() == "cpu"):
-            return fn(*args, **kwargs)
+            return jax.block_until_ready(fn(*args, **kwargs))
 
     return wrapper

@@ -25,6 +25,7 @@ from ._operator import DENSE_BUDGET_BYTES
 from ._validate import check_finite, homogeneous, restore_scale, unit_scale
 from ._methods import AbstractMethod, Pair, as_method, method_name
 from ._spectrum import Spectrum, map_to_unit_area, unit_area, unit_area_pair
+from ._threads import on_one_blas_thread
 
 __all__ = ["TransferResult", "transfer", "transfer_pairs", "stack_pairs"]
 
@@ -104,6 +105,7 @@ def _check_pair(method: AbstractMethod, pair: Pair, k: int, transfer: bool, b: i
         check_finite(C, "pair.C")
 
 
+@on_one_blas_thread
 def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pairs m n_M"], *,
              k: int | None = None, transfer: bool = True, k_targets=None,
              **options) -> TransferResult:
@@ -193,7 +195,7 @@ def _unit_area_pair(method: AbstractMethod, pair: Pair) -> Pair:
     if pair.target is None:
         source, am = unit_area(pair.source)
         target = an = None
-    else:  # one factor for both shapes: ZoomOut-type steps see their relative scale unchanged
+    else:  # both at one area: ZoomOut-type steps compare the shapes at one scale
         source, am, target, an = unit_area_pair(pair.source, pair.target)
     if am is None:
         return pair

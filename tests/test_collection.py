@@ -128,7 +128,7 @@ def test_padded_targets_equal_the_one_pair_path(collection):
 
 def test_source_operators_follow_each_targets_landmarks():
     """The source's share of the estimation problem is computed once per set of source
-    landmarks (and unit-area factor) and reused: a target whose source landmarks differ from
+    landmarks and reused: a target whose source landmarks differ from
     the previous target's gets its own, so each result equals the target's run alone."""
     small = bsfjax.example_pair(levels=1)
     lms = [([0, 100, 200, 300],) * 2, ([5, 150, 250, 400],) * 2, ([0, 100, 200, 300],) * 2]
@@ -141,6 +141,22 @@ def test_source_operators_follow_each_targets_landmarks():
         np.testing.assert_array_equal(together[i].p2p, alone.p2p)
         np.testing.assert_allclose(together[i].C, alone.C, atol=1e-6)
     assert not np.array_equal(together[0].C, together[1].C)  # the landmarks matter
+
+
+def test_targets_in_other_units():
+    """A target in millimetres (×1000) or in kilometres: the point map and labels of the same
+    target in the source's units, ``C`` ×s (the one-pair path's invariance, issue 14)."""
+    small = bsfjax.example_pair(levels=1)
+    lm = ([0, 100, 200, 300],) * 2
+    targets = [bsfjax.Mesh(small.target.vertices * s, small.target.faces)
+               for s in (1.0, 1e3, 1e-3)]
+    res = dict(transfer_collection(small.source, small.labels, targets, landmarks=[lm] * 3,
+                                   method="refined", k=10, zoomout_samples=300))
+    for i, s in ((1, 1e3), (2, 1e-3)):
+        assert np.mean(res[i].p2p == res[0].p2p) > 0.98, s  # float32 near-ties aside
+        assert np.mean(res[i].labels == res[0].labels) > 0.98, s
+        np.testing.assert_allclose(res[i].C / s, res[0].C, atol=2e-3)
+    assert np.mean(res[0].labels == small.labels) > 0.9  # (vertex i ↔ vertex i)
 
 
 @pytest.mark.parametrize("x64", [False, True])

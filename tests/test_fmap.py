@@ -47,14 +47,21 @@ def ref_from_p2p(p2p, evecs_m, evecs_n, mass_n):
     return evecs_n.T @ np.diag(mass_n) @ pi @ evecs_m
 
 
-def ref_to_p2p(C, evecs_m, evecs_n):
+def ref_to_p2p(C, evecs_m, evecs_n, ratio=1.0):
+    """Nearest neighbours of Φ_N among Φ_M Cᵀ·ratio, ratio = S_M/S_N: the two shapes compared
+    at one area (fmap_to_p2p's docstring)."""
     kn, km = C.shape
-    return cKDTree(evecs_m[:, :km] @ C.T).query(evecs_n[:, :kn])[1]
+    return cKDTree(evecs_m[:, :km] @ C.T * ratio).query(evecs_n[:, :kn])[1]
 
 
-def ref_zoomout(C, sm, sn, k, step):
+def area_ratio(sm, sn):
+    return float(np.sum(sm.mass) / np.sum(sn.mass))
+
+
+def ref_zoomout(C, sm, sn, k, step, ratio=None):
+    ratio = area_ratio(sm, sn) if ratio is None else ratio
     while C.shape[0] < k:
-        p2p = ref_to_p2p(C, sm.evecs, sn.evecs)
+        p2p = ref_to_p2p(C, sm.evecs, sn.evecs, ratio)
         kk = min(C.shape[0] + step, k)
         C = ref_from_p2p(p2p, sm.evecs[:, :kk], sn.evecs[:, :kk], sn.mass)
     return C
@@ -110,10 +117,14 @@ def test_faust_ground_truth_roundtrip_recovers_identity(faust):
     C30 = np.asarray(C)[:30, :30]
     p2p_30 = np.asarray(fmap_to_p2p(C30, sm, sn))
     assert np.mean(p2p_30 == gt) < exact - 0.1
-    # float64: exactly scipy's answer on this crowded embedding (near-ties at 1e-6 relative).
+    # float64: exactly scipy's answer on this crowded embedding (near-ties at 1e-6 relative),
+    # the shapes compared at one area (Φ_N against Φ_M Cᵀ·S_M/S_N; here S_M/S_N = 0.991)
     with jax.enable_x64(True):
         p2p_64 = np.asarray(fmap_to_p2p(C30, sm, sn))
-    np.testing.assert_array_equal(p2p_64, ref_to_p2p(C30, sm.evecs, sn.evecs))
+    ratio = np.sum(sm.mass) / np.sum(sn.mass)
+    assert abs(ratio - 1) > 0.005  # the areas differ: without the ratio the answer differs
+    np.testing.assert_array_equal(p2p_64, ref_to_p2p(C30 * ratio, sm.evecs, sn.evecs))
+    assert not np.array_equal(p2p_64, ref_to_p2p(C30, sm.evecs, sn.evecs))
 
 
 # --------------------------------------------------------------------------- nearest neighbours
@@ -173,10 +184,12 @@ def test_nearest_neighbors_far_from_origin():
 def test_fmap_to_p2p_matches_ckdtree(small_pair, adjoint):
     _, _, sm, sn = small_pair
     C = np.random.default_rng(3).standard_normal((20, 25)) * 0.1 + np.eye(20, 25)
-    if adjoint:
+    if adjoint:  # invariant to the areas
         expect = cKDTree(sm.evecs[:, :25]).query(sn.evecs[:, :20] @ C)[1]
     else:
-        expect = ref_to_p2p(C, sm.evecs, sn.evecs)
+        assert abs(area_ratio(sm, sn) - 1) > 0.005  # areas 1 % apart: the ratio matters
+        expect = ref_to_p2p(C, sm.evecs, sn.evecs, area_ratio(sm, sn))
+        assert not np.array_equal(expect, ref_to_p2p(C, sm.evecs, sn.evecs))
     with jax.enable_x64(True):
         got = np.asarray(fmap_to_p2p(C, sm, sn, adjoint=adjoint, chunk_size=64))
     np.testing.assert_array_equal(got, expect)
@@ -231,7 +244,8 @@ def test_sampled_zoomout_matches_numpy_quadrature(small_pair):
         every = tuple(bsfjax.subsample(m, 10_000) for m in (src, tgt))
         C_every = np.asarray(zoomout(C0, sm, sn, 30, step=4, samples=every))
     restrict = lambda s, sub, mass: bsfjax.Spectrum(s.evals, s.evecs[sub.indices], mass)  # noqa
-    want = ref_zoomout(C0, restrict(sm, sub_m, np.ones(150)), restrict(sn, sub_n, w), 30, 4)
+    want = ref_zoomout(C0, restrict(sm, sub_m, np.ones(150)), restrict(sn, sub_n, w), 30, 4,
+                       ratio=area_ratio(sm, sn))
     np.testing.assert_allclose(C, want, atol=1e-10)
     np.testing.assert_allclose(C_every, exact, atol=1e-12)  # every vertex its own sample
     assert not np.allclose(C, exact, atol=1e-3)  # the samples did change the computation
@@ -261,14 +275,24 @@ def test_zoomout_bad_samples_raise(small_pair):
         zoomout(C0, sm, sn, 20, samples=(bsfjax.Subsample(sub.indices + 1000, sub.cells), sub))
 
 
+def unit(s):
+    """The spectrum of the shape rescaled to area 1 exactly (the references' common area)."""
+    a = float(np.sum(s.mass))
+    return bsfjax.Spectrum(np.asarray(s.evals) * a, np.asarray(s.evecs) * np.sqrt(a),
+                           np.asarray(s.mass) / a)
+
+
 @pytest.mark.parametrize("bijective", [False, True])
 def test_icp_orthogonal_and_matches_reference(small_pair, bijective):
-    _, _, sm, sn = small_pair
-    gt = np.arange(sn.n_vertices)
+    _, _, sm0, sn0 = small_pair
+    gt = np.arange(sn0.n_vertices)
+    r = np.sqrt(area_ratio(sm0, sn0))  # C between the unit-area shapes = C·√(S_M/S_N)
     with jax.enable_x64(True):
-        C0 = np.asarray(fmap_from_p2p(sm.truncate(15), sn.truncate(15), gt))
+        C0 = np.asarray(fmap_from_p2p(sm0.truncate(15), sn0.truncate(15), gt))
         C0 = C0 + 0.05 * np.random.default_rng(5).standard_normal(C0.shape)
-        C = np.asarray(icp_refine(C0, sm, sn, n_iter=3, bijective=bijective))
+        C = np.asarray(icp_refine(C0, sm0, sn0, n_iter=3, bijective=bijective)) * r
+    # the references run on the unit-area shapes, where the result is orthogonal
+    sm, sn, C0 = unit(sm0), unit(sn0), C0 * r
     np.testing.assert_allclose(C.T @ C, np.eye(15), atol=1e-10)
     if not bijective:
         np.testing.assert_allclose(C, ref_icp(C0, sm, sn, 3), atol=1e-10)
@@ -283,7 +307,7 @@ def test_icp_orthogonal_and_matches_reference(small_pair, bijective):
             ref = u @ vt
         np.testing.assert_allclose(C, ref, atol=1e-10)
     # ICP keeps the map near the ground truth it started from.
-    p2p = np.asarray(fmap_to_p2p(C, sm, sn))
+    p2p = np.asarray(fmap_to_p2p(C / r, sm0, sn0))
     src = small_pair[0].vertices
     assert np.linalg.norm(src[p2p] - src, axis=1).mean() < 0.15
 

@@ -57,6 +57,24 @@ def test_zero_reference_rule_no_nan():
     np.testing.assert_allclose(e, [0.0, np.sqrt(5.0)], rtol=1e-6)  # absolute error ‖g‖_A
 
 
+@pytest.mark.parametrize("x64", [False, True], ids=["float32", "float64"])
+def test_tiny_reference_beside_a_large_estimate(x64):
+    """f = 1e-30 against f̃ = 1 is an error of 1e30 (its squares underflow in float32: until
+    stop 31 it came out 0.5); f = 1e-205 is zero in float32 (the absolute-error rule) and
+    gives the exact 6.3e204 in float64; under jit the same."""
+    a = np.array([1.0, 3.0])
+    f = np.array([[1e-30, 0.0], [1.58e-205, 0.0], [1e-36, 0.0]])
+    g = np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    want = np.sqrt(np.sum(a * (f - g) ** 2, -1)) / (np.abs(f[:, 0]) * np.sqrt(a[0]))
+    with jax.enable_x64(x64):
+        e = np.asarray(relative_error(f, g, a), np.float64)
+        jitted = np.asarray(jax.jit(relative_error)(f, g, a), np.float64)
+    np.testing.assert_allclose(e[[0, 2]], want[[0, 2]], rtol=1e-5)
+    np.testing.assert_allclose(e[1], want[1] if x64 else 1.0, rtol=1e-5)  # ‖f̃ − f‖_A
+    np.testing.assert_allclose(jitted[[0, 2]], want[[0, 2]], rtol=1e-5)
+    assert np.all(np.isfinite(e)) and np.all(np.isfinite(jitted))
+
+
 def test_broadcast_mass_per_pair_and_jit_vmap():
     rng = np.random.default_rng(2)
     f, g = rng.normal(size=(2, 3, 10)), rng.normal(size=(2, 3, 10))

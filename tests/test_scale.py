@@ -98,3 +98,38 @@ def test_codes_and_metrics_scale(pair, x64):
         e = bsfjax.relative_error(F * 1e300, np.roll(F, 1, 1) * 1e300, spec.mass * 1e-300)
         np.testing.assert_allclose(e, bsfjax.relative_error(F, np.roll(F, 1, 1), spec.mass),
                                    rtol=1e-5)
+
+
+@pytest.mark.parametrize("x64", [False, True], ids=["float32", "float64"])
+@pytest.mark.parametrize("landmarks", [True, False], ids=["landmarks", "orientation-term"])
+def test_shapes_in_different_units(pair, x64, landmarks):
+    """A target in millimetres and a source in metres: the maps and labels of both in metres
+    (until stop 31 the pair kept its relative scale, and such a FAUST pair got 2 % of the SMPL
+    parts right).  ``C`` follows the target's units: ×s for a target ×s in length."""
+    ex, _ = pair
+    labels = (ex.source.vertices[:, 0] > 0).astype(int) + 2 * (ex.source.vertices[:, 2] > 0)
+    lm = ([0, 40, 80, 120], [0, 40, 80, 120]) if landmarks else None
+    with jax.enable_x64(x64), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sm = bsfjax.spectrum(ex.source, K)
+        out = {}
+        for s in (1.0, 1e3, 1e-3):
+            tgt = bsfjax.Mesh(ex.target.vertices * s, ex.target.faces)
+            sn = bsfjax.spectrum(tgt, K)
+            est = bsfjax.estimate_map(sm, sn, k=10, refine_to=K, landmarks=lm,
+                                      source_mesh=ex.source, target_mesh=tgt, zoomout_samples=None)
+            lab = bsfjax.transfer_labels(sm, sn, labels, C=est.C, p2p=est.p2p).labels
+            back = bsfjax.fmap_to_p2p(bsfjax.fmap_from_p2p(sm, sn, ex.p2p), sm, sn)
+            out[s] = (np.asarray(est.C) / s, np.asarray(est.p2p), lab, np.asarray(back))
+    C1, p1, lab1, back1 = out[1.0]
+    if landmarks:  # a real map (without landmarks this near-sphere has no good one: only the
+        # invariance is checked there, which the orientation term's operators also need)
+        assert np.mean(p1 == ex.p2p) > 0.9 and np.mean(lab1 == labels[ex.p2p]) > 0.95
+    for s in (1e3, 1e-3):
+        C, p, lab, back = out[s]
+        tol = 1e-8 if x64 else 2e-3
+        np.testing.assert_allclose(C, C1, atol=tol, err_msg=f"target x{s:g}")
+        # float32: a few near-ties of the nearest-neighbour searches may go the other way
+        assert np.mean(p == p1) >= (1.0 if x64 else 0.98), f"target x{s:g}"
+        assert np.mean(lab == lab1) >= (1.0 if x64 else 0.98), f"target x{s:g}"
+        np.testing.assert_array_equal(back, back1)
