@@ -569,7 +569,7 @@ def fmap_energy(C, source_spectrum: Spectrum, target_spectrum: Spectrum, source_
     gm, gn = _options(laplacian, gamma, orientation, w, source_mesh, target_mesh,
                       np.shape(source_spectrum.evecs), np.shape(target_spectrum.evecs))
     source_spectrum, am, target_spectrum, an = unit_area_pair(source_spectrum, target_spectrum)
-    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an)
+    C = map_to_unit_area(C, am, an)
     sm, sn = _shapes(source_spectrum, target_spectrum, km, kn, dm, dn, gm, gn)
     return _energy_jit(C, sm, sn, w, float(gamma), lap_kind=laplacian,
                        normalize_descriptors=bool(normalize_descriptors),

@@ -283,7 +283,7 @@ def fmap_to_p2p(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *,
     # default comparison presumes an orthogonal C, which an isometry has only at equal areas
     # (the adjoint one is invariant to the areas: Φ_N C and Φ_M both scale by √a_M)
     sm, am, sn, an = unit_area_pair(source_spectrum, target_spectrum)
-    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an)
+    C = map_to_unit_area(C, am, an)
     return _fmap_to_p2p_jit(C, sm.evecs[:, :km], sn.evecs[:, :kn],
                             chunk=chunk, adjoint=bool(adjoint))
 
@@ -381,7 +381,7 @@ def zoomout(C, source_spectrum: Spectrum, target_spectrum: Spectrum, k, *, step:
         mass_n = sub_n.weights(jnp.asarray(mass_n))
         evecs_m, evecs_n = jnp.asarray(evecs_m)[sub_m.indices], jnp.asarray(evecs_n)[sub_n.indices]
     chunk = _chunk_for(evecs_m.shape[0], evecs_n.shape[0], chunk_size)
-    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an)
+    C = map_to_unit_area(C, am, an)
     out = _zoomout_jit(C, evecs_m, evecs_n, mass_n, sizes_n=sizes_n, sizes_m=sizes_m,
                        chunk=chunk, adjoint=bool(adjoint))
     return map_to_unit_area(out, am, an, inverse=True)
@@ -455,7 +455,7 @@ def icp_refine(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *, n_ite
     chunk = _chunk_for(max(n_m, n_n), max(n_m, n_n), chunk_size)
     # orthogonal between the two shapes at one area (as fmap_to_p2p), back in the given bases
     sm, am, sn, an = unit_area_pair(source_spectrum, target_spectrum)
-    C = map_to_unit_area(C if isinstance(C, jax.Array) else np.asarray(C), am, an)
+    C = map_to_unit_area(C, am, an)
     out = _icp_jit(C, sm.evecs[:, :km], sn.evecs[:, :kn], sm.mass, sn.mass, n_iter=int(n_iter),
                    chunk=chunk, adjoint=bool(adjoint), bijective=bool(bijective))
     return map_to_unit_area(out, am, an, inverse=True)

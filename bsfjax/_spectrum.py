@@ -491,15 +491,14 @@ def unit_area(spec: Spectrum):
 
 def map_to_unit_area(C, area_source, area_target, inverse: bool = False):
     """``C·√(S_M/S_N)`` (a map between original bases → between unit-area bases), or the
-    inverse; ``C`` unchanged when an area is ``None`` (traced)."""
+    inverse; ``C`` unchanged when an area is ``None`` (traced).  A host array (or list) comes
+    back as a float64 numpy array, a JAX array in its dtype."""
     if C is None or area_source is None or area_target is None:
         return C
     r = np.sqrt(np.asarray(area_source, np.float64) / np.asarray(area_target, np.float64))
     r = 1.0 / r if inverse else r
     if np.ndim(r):
         r = r[..., None, None]
-    if isinstance(C, np.ndarray):
+    if not isinstance(C, jax.Array):
         return np.asarray(C, np.float64) * r
-    import jax.numpy as jnp
-
     return C * jnp.asarray(r, jnp.result_type(C))
