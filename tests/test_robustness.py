@@ -359,6 +359,26 @@ def _scaled_mesh_transfer(s, scale):
     return out
 
 
+def _tiny_reference(s):
+    """f = 1e-30·F against f̃ = F: an error of ~1e30 (each norm on its own scale)."""
+    e = float(bsfjax.relative_error(1e-30 * s.F[0], s.F[0], s.spec.mass))
+    np.testing.assert_allclose(e, (1 - 1e-30) * 1e30, rtol=1e-4)
+    return e
+
+
+def _pair_in_units(s, scale):
+    """The point map of a pair's functional map, the target ×scale: the same as in one unit."""
+    v = s.v * (1 + 0.2 * np.random.default_rng(0).random((s.n, 1)))
+    src = bsfjax.spectrum(bsfjax.Mesh(s.v, s.f), 10)
+    out = []
+    for sc in (1.0, scale):
+        tgt = bsfjax.spectrum(bsfjax.Mesh(v * sc, s.f), 10)
+        C = bsfjax.fmap_from_p2p(src, tgt, np.arange(s.n))
+        out.append(np.asarray(bsfjax.fmap_to_p2p(C, src, tgt)))
+    np.testing.assert_array_equal(out[1], out[0])
+    return out[1]
+
+
 HANDLED_INPUTS = [
     ("load-zero-area-face", lambda s, tmp: _load_text(
         tmp, "deg.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n2 0 0\n3 0 1 2\n3 0 1 3\n").vertices,
@@ -391,6 +411,8 @@ HANDLED_INPUTS = [
     ("relative-error-huge-values", lambda s, tmp: bsfjax.relative_error(
         np.float32(1e30) * s.F.astype(np.float32), np.float32(1e30) * np.roll(s.F, 1, 1)
         .astype(np.float32), s.spec.mass.astype(np.float32)), None),
+    ("relative-error-tiny-reference", lambda s, tmp: _tiny_reference(s), None),
+    ("pair-in-different-units", lambda s, tmp: _pair_in_units(s, 1e3), None),
     ("relative-error-tiny-values", lambda s, tmp: bsfjax.relative_error(
         np.float32(1e-30) * s.F.astype(np.float32), np.zeros(s.n, np.float32),
         s.spec.mass.astype(np.float32)), None),
