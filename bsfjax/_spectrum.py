@@ -455,6 +455,10 @@ def unit_area_pair(source: Spectrum, target: Spectrum):
 
 
 def _rescaled(spec: Spectrum, a) -> Spectrum:
+    if np.all(a == 1) and all(isinstance(x, np.ndarray) and x.dtype == np.float64
+                              for x in (spec.evals, spec.evecs, spec.mass)):
+        return spec  # already what the rescaling would give: no n × k copy (the steps after
+        # estimate_map's own rescaling see the source at factor 1)
     return Spectrum(np.asarray(spec.evals, np.float64) * a[..., None],
                     np.asarray(spec.evecs, np.float64) * np.sqrt(a)[..., None, None],
                     np.asarray(spec.mass, np.float64) / a[..., None])
