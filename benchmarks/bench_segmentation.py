@@ -51,20 +51,22 @@ def decimated(data: Path, seg: Path, out: Path, cache) -> int:
     from scipy.spatial import cKDTree
 
     template, _ = load_segmentation(seg)
+    names = sorted({n for pair in PAIRS["faust"] for n in pair})
+    meshes = {n: bj.load_mesh(data / "faust" / f"tr_reg_{n}.off") for n in names}
+    spectra = {n: bj.spectrum(m, K_SPECTRA, cache_dir=cache) for n, m in meshes.items()}
     md, rows = [], []
     for red in REDUCTIONS:
         part, sizes = [], []
         for a, b in PAIRS["faust"]:
-            src, reg = (bj.load_mesh(data / "faust" / f"tr_reg_{n}.off") for n in (a, b))
+            src, reg = meshes[a], meshes[b]
             v, f = fast_simplification.simplify(np.asarray(reg.vertices, np.float32),
                                                 np.asarray(reg.faces, np.int32),
                                                 target_reduction=red)
             tgt = bj.Mesh(v.astype(np.float64), f.astype(np.int64))
             gt = cKDTree(reg.vertices).query(tgt.vertices)[1]  # = source vertex (same order)
             sizes.append(tgt.n_vertices)
-            sm = bj.spectrum(src, K_SPECTRA, cache_dir=cache)
             sn = bj.spectrum(tgt, K_SPECTRA, cache_dir=cache)
-            part += segmentation_pair(sm, sn, (src, tgt), template, template[gt], gt,
+            part += segmentation_pair(spectra[a], sn, (src, tgt), template, template[gt], gt,
                                       methods=("p2p", "refined"),
                                       names=(f"tr_reg_{a}", f"tr_reg_{b}"))
             print(f"{a} -> {b} at -{100 * red:.0f} % ({tgt.n_vertices} vertices): " + ", ".join(
