@@ -1,7 +1,7 @@
 """One source to many targets (issue 16): one ``bsfjax transfer ... --out-dir`` call against
 separate ``bsfjax transfer ... --out`` calls, seconds per target after start-up, compilations.
 
-    python benchmarks/bench_collection.py --out R [--quick] [--batch B]
+    python benchmarks/bench_collection.py --out R [--quick] [--batch B] [--one-start]
 
 Sets (meshes from ../shared/data, read by path, nothing copied into the repository):
 
@@ -20,6 +20,9 @@ with a warm compilation cache (the second of two rounds), and in one process the
 compiled (a second pass) with the number of compilations of the first pass.
 ``--quick``: the ``six`` set only.  ``--batch B``: the one-call runs (``--batch B``) and the
 in-process passes (``batch=B``) run B targets per device under ``vmap`` (for accelerators).
+``--one-start``: every run with ``--one-start`` (``starts=((k, 7.0),)``): without landmarks
+the map from one start, through the batched stages, instead of ``estimate_map``'s choice among
+15 starts per target (the default since stop 32; the sets here have no landmarks).
 """
 
 from __future__ import annotations
@@ -124,7 +127,8 @@ COLD = {**os.environ, "JAX_COMPILATION_CACHE_DIR": ""}
 
 def cli(*args, env=None) -> tuple[float, str]:
     t = time.perf_counter()
-    r = subprocess.run([sys.executable, "-m", "bsfjax.cli", *map(str, args)], capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "bsfjax.cli", *map(str, args), *FLAGS],
+                       capture_output=True,
                        text=True, env=COLD if env is None else env)
     if r.returncode != 0:
         raise RuntimeError(r.stderr[-2000:])
@@ -136,6 +140,10 @@ def accuracy(labels: np.ndarray, truth: np.ndarray, mesh_path: Path) -> float:
 
     mass = np.asarray(bsfjax.spectrum(bsfjax.load_mesh(mesh_path), 2).mass)
     return float(np.sum(mass * (labels == truth)) / mass.sum())
+
+
+#: extra arguments of every ``bsfjax transfer`` call (``--one-start``)
+FLAGS: list[str] = []
 
 
 def measure(name, source, labels_file, targets, folder: Path, truth: bool, k: int = 30,
@@ -187,7 +195,8 @@ def kill_and_resume(source, labels_file, targets, folder: Path, reference: Path,
 
     out = folder / "killed"
     argv = [sys.executable, "-m", "bsfjax.cli", "transfer", str(source), *map(str, targets),
-            "--labels", str(labels_file), "--out-dir", str(out), "-k", str(k), "--no-progress"]
+            "--labels", str(labels_file), "--out-dir", str(out), "-k", str(k), "--no-progress",
+            *FLAGS]
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=COLD)
     while proc.poll() is None and len(list(out.glob("[!.]*.txt"))) < 2:  # not temporaries
         time.sleep(0.05)
@@ -220,7 +229,8 @@ targets = {[str(t) for t in targets]!r}
 out = {{}}
 for p in (1, 2):
     c0, t = n[0], time.perf_counter()
-    res = dict(bsfjax.transfer_collection({str(source)!r}, lab, targets, k={k}, batch={batch}))
+    res = dict(bsfjax.transfer_collection({str(source)!r}, lab, targets, k={k}, batch={batch},
+                                          starts={((k, 7.0),) if FLAGS else None!r}))
     out[p] = dict(seconds=time.perf_counter() - t, compiles=n[0] - c0,
                   per_target=[res[i].seconds for i in range(len(targets))],
                   vertices=[res[i].n_vertices for i in range(len(targets))])
@@ -246,7 +256,11 @@ def main() -> None:
     ap.add_argument("--out", required=True)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--batch", type=int, default=1, help="targets per device under vmap")
+    ap.add_argument("--one-start", action="store_true",
+                    help="without landmarks, one start per map (the batched stages)")
     args = ap.parse_args()
+    if args.one_start:
+        FLAGS.append("--one-start")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     labels = smpl_labels()

@@ -8,6 +8,7 @@ the ground-truth maps; then times the default transfer (``transfer_labels``, met
 
     python benchmarks/bench_segmentation.py --out /tmp/seg [--data ../shared/data] [--quick | --quick-maps]
     python benchmarks/bench_segmentation.py --out /tmp/seg --decimated
+    python benchmarks/bench_segmentation.py --out /tmp/seg --no-landmarks
 
 Writes ``segmentation_bench.csv`` and ``segmentation_bench.md`` into ``--out``.
 
@@ -18,6 +19,12 @@ six FAUST pairs with the target decimated by 50, 70 and 85 % (quadric edge colla
 through the three maps. The target's truth is the label of its nearest registration vertex,
 which is also its ground-truth match on the source (the registrations share the vertex
 order). Writes ``segmentation_decimated.csv`` and ``segmentation_decimated.md``.
+
+``--no-landmarks``: p2p and ``refined`` on the nine pairs through the map ``bsfjax transfer``
+estimates without ``--landmarks`` (several starts, landmarks read off the kept map) and through
+the single start it estimated until stop 32; then the two estimates' seconds on FAUST 000→010
+(median of ``--repeats`` warm calls, the same run).  Writes ``segmentation_nolandmarks.csv``
+and ``segmentation_nolandmarks.md``.
 """
 
 from __future__ import annotations
@@ -84,6 +91,40 @@ def decimated(data: Path, seg: Path, out: Path, cache) -> int:
     return 0
 
 
+def no_landmarks_report(rows, data: Path, out: Path, args) -> int:
+    """``--no-landmarks``: the rows' tables, and both estimates timed on FAUST 000→010."""
+    ds = load_dataset(data / "faust")
+    src, tgt = ds.shapes[0], ds.shapes[[e.name for e in ds.shapes].index("tr_reg_010")]
+    sm, sn = (bj.spectrum(e.mesh, 100, cache_dir=args.cache).truncate(60) for e in (src, tgt))
+    kw = dict(k=30, refine_to=60, source_mesh=src.mesh, target_mesh=tgt.mesh)
+    peers = {"several starts (default)": {}, "one start": dict(starts=((30, 7.0),))}
+    med = {}
+    for name, extra in peers.items():
+        times = []
+        for _ in range(args.repeats + 1):
+            t0 = time.perf_counter()
+            est = bj.estimate_map(sm, sn, **kw, **extra)
+            times.append(time.perf_counter() - t0)
+        med[name] = float(np.median(times[1:]))
+        if est.start is not None:
+            chosen = (f"kept start {est.start}, derived landmarks "
+                      f"{'kept' if est.landmarks is not None else 'not kept'}, distortion "
+                      f"{est.distortion:.4f}, orientation {est.orientation:.3f}")
+    rep = report(rows, (30,))
+    write_csv(rows, out / "segmentation_nolandmarks.csv")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    timing = (f"estimate_map without landmarks on FAUST 000→010 (k = 30, ZoomOut to 60), median "
+              f"of {args.repeats} warm calls: " + ", ".join(f"{n} {m:.2f} s" for n, m in
+                                                           med.items()) +
+              f" ({med['several starts (default)'] / med['one start']:.1f}× the one start); "
+              f"{chosen}; {os.cpu_count()} CPUs, load average {load:.1f}, "
+              f"{platform.machine()}.")
+    (out / "segmentation_nolandmarks.md").write_text(rep.markdown + "\n\n" + timing + "\n")
+    print(rep.markdown)
+    print(timing)
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -95,6 +136,8 @@ def main(argv=None) -> int:
                     help="only p2p and refined, through all three maps")
     ap.add_argument("--decimated", action="store_true",
                     help="only p2p and refined on the FAUST pairs with decimated targets")
+    ap.add_argument("--no-landmarks", action="store_true",
+                    help="only p2p and refined through the maps estimated without landmarks")
     args = ap.parse_args(argv)
     data = Path(args.data)
     seg = data / "segmentations" / "smpl_vert_segmentation.json"
@@ -107,7 +150,9 @@ def main(argv=None) -> int:
         ds = load_dataset(data / name)
         index = {e.name: i for i, e in enumerate(ds.shapes)}
         ids = [(index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]) for a, b in pairs]
-        runs = ([(("p2p", "refined"), ("default",))] if args.quick else
+        free = ("no landmarks", "no landmarks, one start")
+        runs = ([(("p2p", "refined"), free)] if args.no_landmarks else
+                [(("p2p", "refined"), ("default",))] if args.quick else
                 [(("p2p", "refined"), ("default", "crude", "truth"))] if args.quick_maps else
                 [(tuple(METHODS), ("default",)), (FAST, ("crude", "truth"))])
         for methods, maps in runs:
@@ -121,6 +166,8 @@ def main(argv=None) -> int:
             rows += part
             print(f"{name} {maps}: {len(part)} rows in {time.perf_counter() - t0:.0f} s",
                   file=sys.stderr)
+    if args.no_landmarks:
+        return no_landmarks_report(rows, data, out, args)
     # the default transfer after the map, warm (FAUST 000 -> 010, the CLI's default map)
     ds = load_dataset(data / "faust")
     template, _ = load_segmentation(seg)

@@ -14,6 +14,7 @@ owns each step, see ``docs/architecture.md``)::
     coding      OMP, ErrorOMP, LeastSquares, Lasso, encode, decode            _coding, ...
     transfer    METHODS, BSF, ..., Pair, transfer, transfer_pairs             _methods, _transfer
     maps        wks, hks, estimate_fmap, zoomout, fmap_to_p2p, estimate_map   _fmap, _estimation, ...
+                map_distortion, orientation_agreement, choose_map             _distortion
     mesh level  transfer_values, transfer_labels                              _highlevel
     collection  transfer_collection (one source to many targets, batched)    _collection
     metrics     relative_error, labels_to_indicators, random_indicators       _metrics, _indicators
@@ -68,6 +69,7 @@ from ._descriptors import hks, wks
 from ._fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
 from ._refine import refine_point_maps
 from ._estimation import FmapWeights, estimate_fmap, fmap_energy
+from ._distortion import choose_map, map_distortion, orientation_agreement
 
 # mesh-level entry points
 from ._highlevel import (LabelTransfer, MapEstimate, estimate_map, transfer_labels,
@@ -107,7 +109,8 @@ __all__ = [
     # functional maps
     "hks", "wks", "fmap_from_p2p", "fmap_to_p2p", "icp_refine", "nearest_neighbors", "zoomout",
     "refine_point_maps",
-    "FmapWeights", "estimate_fmap", "fmap_energy",
+    "FmapWeights", "estimate_fmap", "fmap_energy", "map_distortion", "orientation_agreement",
+    "choose_map",
     # mesh level
     "MapEstimate", "estimate_map", "LabelTransfer", "transfer_values", "transfer_labels",
     "transfer_collection", "TargetTransfer", "size_bucket",

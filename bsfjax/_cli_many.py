@@ -142,7 +142,7 @@ def cmd_transfer_many(args, error) -> int:
     mesh_dir = Path(args.mesh_out_dir) if args.mesh_out_dir else None
     landmarks = _read_landmarks_file(args.landmarks_file, targets, error)
     source = load_mesh(args.source)
-    from .cli import read_values
+    from .cli import one_start, read_values
 
     values = read_values(args, source.n_vertices)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -166,7 +166,7 @@ def cmd_transfer_many(args, error) -> int:
         source, values, [targets[i] for i in todo], labels=labels, method=args.method, k=args.k,
         landmarks=lambda j: landmarks.get(todo[j]), threshold=args.threshold,
         errors="report", spectrum_cache=args.spectrum_cache,
-        batch=1 if args.batch is None else args.batch)
+        batch=1 if args.batch is None else args.batch, starts=one_start(args, args.k))
     mine = len(process_share(range(len(todo))))
     bar = tqdm(total=mine, desc="targets", unit="target", disable=args.no_progress,
                file=sys.stderr)

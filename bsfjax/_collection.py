@@ -6,7 +6,12 @@ WKS), the functional map of :func:`bsfjax.estimate_fmap` (orientation term witho
 landmarks), ZoomOut, its point map, and the method's transfer through the one engine
 (``method.prepare`` / ``carry``) — but with the source prepared once and the targets run
 through **three jitted stages** per group of equal shapes (the estimation problem, the map,
-the transfer):
+the transfer; :mod:`bsfjax._collection_stages`).  A target **without landmarks** gets
+:func:`bsfjax.estimate_map`'s own point map, computed on the host with the target's other host
+work: its choice among several starts by geodesic distortion and orientation is Dijkstra and
+numpy, not a jitted stage; the problem stage (for the map's energy) and the transfer stage then
+run on it as for any other target.  With ``starts=((k, WKS_VARIANCE),)`` (``bsfjax transfer
+--one-start``) such a target runs through the three stages like the others.
 
 - **size buckets**: a target of ``n`` vertices (``m`` faces) is padded to the bucket size
   ``size_bucket(n)`` (``size_bucket(m)``): extra vertices have zero mass and zero eigenvector
@@ -33,7 +38,6 @@ BLAS calls run on one thread (:mod:`bsfjax._threads`), as does the eigensolve of
 
 from __future__ import annotations
 
-import functools
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import NamedTuple
@@ -43,17 +47,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._buckets import BUCKET_FACTORS, merge_buckets, size_bucket
-from ._descriptors import _wks_jit
+from ._collection_stages import _Config, _dispatch, _stages_for
 from ._errors import BSFError
-from ._estimation import FmapWeights, _cast, _energy, _geometry, _Geometry, _setup, _Shape, \
-    _shape_ops, _solve, _weights_array
-from ._fmap import _default_chunk, _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
-from ._highlevel import ORIENT_WEIGHT, ZOOMOUT_SAMPLES, ZOOMOUT_STEP, _check_landmarks, \
-    _regime
+from ._estimation import _geometry
+from ._fmap import _default_chunk
+from ._highlevel import LANDMARK_FREE_STARTS, WKS_VARIANCE, ZOOMOUT_SAMPLES, _check_landmarks, \
+    _check_starts, _regime, estimate_map
 from ._indicators import labels_to_indicators
 from ._mesh import Mesh, load_mesh
-from ._methods import BSF, GeodesicBalls, Pair, RefinedPullBack, SaturatedHeat, \
-    SpectralProjection, as_method, method_name
+from ._methods import BSF, GeodesicBalls, RefinedPullBack, SaturatedHeat, as_method, \
+    method_name
 from ._refine import REFINE_EIGENPAIRS
 from ._sampling import Subsample, subsample
 from ._spectrum import Spectrum, map_to_unit_area, spectrum, unit_area, unit_area_pair
@@ -89,181 +92,6 @@ class TargetTransfer(NamedTuple):
     seconds: float
 
 
-class _Config(NamedTuple):
-    """Everything static of the kernel (hashable: one compiled kernel per config and shape)."""
-
-    method: object
-    k: int  # map size
-    k_map: int  # ZoomOut size
-    k_spec: int  # eigenpairs per shape
-    n_energies: int
-    n_landmarks: int  # 0: orientation term instead
-    chunk: int
-    zoomout_chunk: int | None  # None: ZoomOut on every vertex, else on the subsamples
-
-
-@functools.lru_cache(maxsize=64)
-def _stages_for(cfg: _Config, batched: bool = False):
-    """The jitted stages of a config (one set of function objects per config): the source's
-    operators, then the three per-target stages — batched under ``vmap`` over a leading
-    target axis when ``batched`` (the source arrays shared, each target's source operators its
-    own, since they follow its landmarks).
-
-    The map's solve and its ZoomOut on the subsamples see only ``k``-sized operators and
-    ``s_b`` samples, so ``_map_stage`` compiles once for all size buckets; only the stages
-    that touch every vertex (descriptors, final point map, the method) compile per bucket.
-    Measured on six FAUST-like targets: the map stage's 1.4 s of compilation is saved for
-    every bucket after the first (the two others take 1.9 s and 2.2–3.0 s per bucket)."""
-    problem = functools.partial(_problem_stage, cfg=cfg)
-    fmap = functools.partial(_map_stage, cfg=cfg)
-    transfer = functools.partial(_transfer_stage, cfg=cfg)
-    if batched:
-        problem = jax.vmap(problem, in_axes=(None, 0, 0))
-        fmap = jax.vmap(fmap)
-        transfer = jax.vmap(transfer, in_axes=(None, 0, 0, 0))
-    return (jax.jit(functools.partial(_source_ops_stage, cfg=cfg)), jax.jit(problem),
-            jax.jit(fmap), jax.jit(transfer))
-
-
-def _dispatch(cfg: _Config, replicated: list, items: list, source_ops: list,
-              batch: int = 1) -> list:
-    """Run the stages on up to ``d × batch`` targets of one bucket: targets ``[i·batch,
-    (i+1)·batch)`` on local device ``i``, under ``vmap`` when ``batch > 1``.
-
-    Every call is dispatched before any result is awaited, so the devices compute their
-    targets at the same time (targets are independent: no communication).  A group short of
-    ``batch`` targets runs at the full batch size (its last target repeated), so a target's
-    result does not depend on the targets it is batched with.  Not a GSPMD or ``shard_map``
-    program: ``shard_map`` trips lineax's structure check inside the estimation's solve.
-    ``replicated[i]``: the source arrays already on device ``i``; ``source_ops[j]``: the
-    source's share of item ``j``'s problem, on item ``j``'s device.  Returns per group its
-    outputs and its number of real targets."""
-    devices = jax.local_devices()
-    _, problem, fmap, transfer = _stages_for(cfg, batch > 1)
-    out = []
-    for d, start in enumerate(range(0, len(items), batch)):
-        its, ops = items[start:start + batch], source_ops[start:start + batch]
-        n_real = len(its)
-        if batch > 1:
-            its, ops = its + its[-1:] * (batch - n_real), ops + ops[-1:] * (batch - n_real)
-            it = jax.device_put(jax.tree.map(lambda *x: np.stack(x), *its), devices[d])
-            op = jax.tree.map(lambda *x: jnp.stack(x), *ops)
-        else:
-            it, op = jax.device_put(its[0], devices[d]), ops[0]
-        pb, zo = problem(replicated[d], it, op)
-        out.append((transfer(replicated[d], it, pb, fmap(pb, zo)), n_real))
-    return out
-
-
-def _spectra(rep, it):
-    """The pair's spectra, both at one area near 1 (:func:`bsfjax.unit_area_pair`: the source
-    at its own unit-area factor, whatever the target)."""
-    return _source_spectrum(rep), Spectrum(it["evals"], it["evecs"], it["mass"])
-
-
-def _source_spectrum(rep):
-    return Spectrum(rep["evals"], rep["evecs"], rep["mass"])
-
-
-def _descriptors(s: Spectrum, lm, cfg: _Config):
-    """WKS of the first ``k`` eigenpairs, and WKS at the landmarks ``lm`` when given."""
-    k = cfg.k
-
-    def w(landmarks):
-        return _wks_jit(s.evals[:k], s.evecs[:, :k], s.mass, None, None, landmarks, 7.0,
-                        n_energies=cfg.n_energies, area_normalize=True, scaled=True)
-    return w(None) if lm is None else jnp.concatenate([w(None), w(lm)], axis=1)
-
-
-def _shape(s: Spectrum, geom: _Geometry | None, cfg: _Config, descr=None) -> _Shape:
-    """A shape of the estimation problem: its first ``k`` eigenpairs, in the working dtype."""
-    k = cfg.k
-    return _cast(_Shape(s.evals[:k], s.evecs[:, :k], s.mass, descr, geom),
-                 jnp.result_type(float))
-
-
-def _geometry_of(arrays, cfg: _Config) -> _Geometry | None:
-    """A shape's geometry for the orientation term (used without landmarks only)."""
-    if cfg.n_landmarks:
-        return None
-    return _Geometry(arrays["faces"], arrays["K"], arrays["third_area"])
-
-
-def _source_ops_stage(rep, lm_m, *, cfg: _Config):
-    """The source's share of the estimation problem (:func:`_shape_ops`: descriptors and their
-    operators) with source landmarks ``lm_m``: once for all the targets that share them, not
-    once per target (0.06 s of the problem stage's 0.10 s on a 5.5K-vertex target)."""
-    src = _source_spectrum(rep)
-    return _shape_ops(_shape(src, _geometry_of(rep, cfg), cfg, _descriptors(src, lm_m, cfg)),
-                      normalize_descriptors=True)
-
-
-def _problem_stage(rep, it, ops_m, *, cfg: _Config):
-    """Per bucket: the descriptors' estimation problem (``k``-sized operators; the source's
-    share ``ops_m`` from :func:`_source_ops_stage`) and ZoomOut's inputs (the eigenvector rows
-    of the subsamples and their cell weights)."""
-    dt = jnp.result_type(float)
-    km = cfg.k_map
-    src, tgt = _spectra(rep, it)
-    weights = FmapWeights() if cfg.n_landmarks else FmapWeights(orient=ORIENT_WEIGHT)
-    sn = _shape(tgt, _geometry_of(it, cfg), cfg,
-                _descriptors(tgt, it.get("landmarks_target"), cfg))
-    sm = _shape(src, None, cfg)  # its descriptors' operators (orientation too): ops_m
-    pb = _setup(sm, sn, jnp.asarray(_weights_array(weights), dt), lap_kind="resolvent",
-                gamma=jnp.asarray(0.5, dt), normalize_descriptors=True, normalize_weights=True,
-                orient_sign=1.0, ops_m=ops_m)
-    zo_m, zo_n = src.evecs[:, :km].astype(dt), tgt.evecs[:, :km].astype(dt)
-    w_n = tgt.mass.astype(dt)
-    if cfg.zoomout_chunk is not None:  # padded samples: weight 0 (no cell names them)
-        idx_n = it["zo_indices"]
-        w_n = Subsample(idx_n, it["zo_cells"]).weights(w_n)
-        zo_m, zo_n = zo_m[rep["zo_indices"]], zo_n[idx_n]
-    return pb, (zo_m, zo_n, w_n)
-
-
-def _map_stage(pb, zo, *, cfg: _Config):
-    """The functional map: the estimate ``C₀`` (``k × k``), then ZoomOut ``k → k_map`` in steps
-    of ``ZOOMOUT_STEP`` on the subsamples, as :func:`bsfjax.estimate_map`.  Free of the vertex
-    count when ZoomOut runs on subsamples."""
-    dt = jnp.result_type(float)
-    rtol, atol = (1e-10, 1e-12) if dt == jnp.float64 else (1e-4, 1e-6)
-    C0 = _solve(pb, rtol=rtol, atol=atol, max_steps=8)
-    k, km = cfg.k, cfg.k_map
-    if km <= k:
-        return C0
-    zo_m, zo_n, w_n = zo
-    sizes = _size_schedule(k, km, ZOOMOUT_STEP, -(-(km - k) // ZOOMOUT_STEP))
-    chunk = cfg.chunk if cfg.zoomout_chunk is None else cfg.zoomout_chunk
-    return _zoomout_jit(C0, zo_m, zo_n, w_n, sizes_n=sizes, sizes_m=sizes, chunk=chunk,
-                        adjoint=False)
-
-
-def _transfer_stage(rep, it, pb, C_ref, *, cfg: _Config):
-    """Per bucket: the point map of ``C_ref`` over every vertex, its ``k × k`` map and energy,
-    and the method's transfer through the one engine's ``prepare`` / ``carry``."""
-    dt = jnp.result_type(float)
-    k, km = cfg.k, cfg.k_map
-    src, tgt = _spectra(rep, it)
-    phi_m, phi_n = src.evecs.astype(dt), tgt.evecs.astype(dt)
-    p2p = _to_p2p(C_ref, phi_m[:, :km], phi_n[:, :km], cfg.chunk, False,
-                  jnp.sum(tgt.mass > 0))  # (the padding's chunks are skipped)
-    C = _from_p2p(p2p, phi_m[:, :k], phi_n[:, :k], tgt.mass.astype(dt))
-    energy = _energy(C, pb)
-    method = cfg.method
-    full = getattr(method, "full_spectra", False)
-    two_k = isinstance(method, SpectralProjection) and method.factor == 2
-    samples = None
-    if cfg.zoomout_chunk is not None:  # "refined" continues on ZoomOut's samples
-        samples = (Subsample(rep["zo_indices"], rep["zo_cells"]),
-                   Subsample(it["zo_indices"], it["zo_cells"]))
-    pair = Pair(source=src if full or two_k else src.truncate(k),
-                target=tgt if full else tgt.truncate(k), C=C, p2p=p2p,
-                centers=rep.get("centers"), distances=rep.get("distances"), samples=samples)
-    F = rep["F"].astype(dt)
-    _, carry, _ = method.prepare(pair, F, k)
-    return {"values": carry(C), "p2p": p2p, "C": C, "energy": energy}
-
-
 # --------------------------------------------------------------------------- host side
 
 
@@ -275,6 +103,7 @@ class _Target(NamedTuple):
     landmarks: tuple | None
     samples: Subsample | None  # ZoomOut's
     seconds: float
+    p2p: np.ndarray | None = None  # without landmarks: estimate_map's, chosen among starts
 
 
 def _as_mesh(target) -> Mesh:
@@ -349,6 +178,8 @@ def _item_arrays(t: _Target, n_b: int, m_b: int, s_b: int) -> dict:
     if t.samples is not None:
         out["zo_indices"] = _pad_rows(t.samples.indices, s_b)
         out["zo_cells"] = _pad_rows(t.samples.cells, n_b)
+    if t.p2p is not None:  # (padded vertices: zero mass, any source vertex)
+        out["p2p"] = _pad_rows(np.asarray(t.p2p, np.int32), n_b)
     if t.landmarks is not None:  # the source's: in its operators (source_ops)
         out["landmarks_target"] = np.asarray(t.landmarks[1], np.int32)
     else:
@@ -376,8 +207,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                         n_energies: int = 100, n_bsf: float | int = 0.05, seed: int = 0,
                         zoomout_samples: int | None = ZOOMOUT_SAMPLES,
                         spectrum_cache: str | None = None,
-                        errors: str = "raise",
-                        batch: int = 1) -> Iterator[tuple[int, TargetTransfer | Exception]]:
+                        errors: str = "raise", batch: int = 1,
+                        starts=None) -> Iterator[tuple[int, TargetTransfer | Exception]]:
     """Transfer one segmentation (or functions) from ``source`` to every mesh of ``targets``.
 
     Yields ``(index, result)`` as batches finish (grouped by size bucket, so not in order);
@@ -399,6 +230,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     - ``threshold``: as :func:`bsfjax.transfer_labels`.
     - ``zoomout_samples``: as :func:`bsfjax.estimate_map` (ZoomOut on this many
       farthest-point samples per shape; ``None``: every vertex).
+    - ``starts``: as :func:`bsfjax.estimate_map`, for the targets without landmarks: by
+      default its several starts, each target's map then estimated by
+      :func:`bsfjax.estimate_map` on the host (accurate, about 5 s for a FAUST-sized target on
+      two cores, compiled per vertex count); ``((k, WKS_VARIANCE),)``, a single start, runs
+      them through the batched stages with the others (16× faster, and less accurate:
+      docs/results.md, "Without landmarks").
     - ``pad``: pad vertex and face counts to :func:`size_bucket` sizes, merged for a
       collection of at most 64 targets (module doc; ``False``: one compilation per distinct
       count).
@@ -470,6 +307,9 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         rep["zo_cells"] = sub_m.cells
         zo_chunk = _default_chunk(sub_m.indices.size)
     lm_of = _landmark_lookup(landmarks)
+    # one start, the batched stages' own: (k, WKS_VARIANCE) with the orientation term
+    one_start = _check_starts(starts, k_map, ((k, WKS_VARIANCE),), LANDMARK_FREE_STARTS) \
+        == ((k, WKS_VARIANCE),)
     pending: dict[tuple, list[_Target]] = {}
 
     def prepare(i, mesh: Mesh, t: float) -> _Target:
@@ -481,7 +321,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
-        return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t)
+        p2p = None
+        if lm is None and not one_start:  # the choice among starts: estimate_map's own map
+            p2p = estimate_map(src_spec.truncate(k_map), spec.truncate(k_map), k=k,
+                               refine_to=k_map, source_mesh=source, target_mesh=mesh,
+                               zoomout_samples=zoomout_samples, starts=starts).p2p
+        return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t, p2p)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind

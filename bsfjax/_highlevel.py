@@ -12,11 +12,13 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float, Int
+from scipy.spatial import cKDTree
 
 from ._methods import (AbstractMethod, BSF, GeodesicBalls, PullBack, RefinedPullBack, SaturatedHeat,
                        SpectralProjection, as_method, method_name)
 from ._transfer import Pair, transfer
 from ._descriptors import wks
+from ._distortion import choose_map, map_distortion, orientation_agreement
 from ._errors import BSFError
 from ._estimation import FmapWeights, estimate_fmap
 from ._geodesics import geodesic_distances
@@ -25,7 +27,7 @@ from ._indicators import labels_to_indicators
 from ._sampling import farthest_point_sampling, subsample
 from ._spectrum import Spectrum, map_to_unit_area, unit_area_pair
 from ._threads import on_one_blas_thread
-from ._validate import check_indices, check_int, check_source_mesh, compact_labels
+from ._validate import check_indices, check_int, check_real, check_source_mesh, compact_labels
 
 __all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", "LabelTransfer",
            "REGIMES"]
@@ -33,10 +35,19 @@ __all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", 
 class MapEstimate(NamedTuple):
     C: np.ndarray  #: ``(k, k)`` functional map source → target
     p2p: np.ndarray  #: ``(n_N,)`` point map, target vertex → source vertex
-    C_initial: np.ndarray  #: the descriptor-based map before ZoomOut
+    C_initial: np.ndarray  #: the descriptor-based map before ZoomOut (``k₀ × k₀``: its start's)
     #: ``(source, target)`` :class:`~bsfjax.Subsample` s ZoomOut ran on (``None``: every
     #: vertex); ``"refined"`` continues on them (``transfer_labels(..., samples=)``)
     samples: tuple | None = None
+    #: with several starts (no landmarks): the kept map's geodesic distortion
+    #: (:func:`bsfjax.map_distortion`) and orientation agreement
+    #: (:func:`bsfjax.orientation_agreement`), the start ``(k₀, WKS variance)`` chosen among
+    #: them, and the landmark pairs read off its map when the estimate made with them was kept;
+    #: ``None`` with landmarks or a single start
+    distortion: float | None = None
+    orientation: float | None = None
+    start: tuple | None = None
+    landmarks: tuple | None = None
 
 
 def _check_landmarks(landmarks, n_m: int, n_n: int):
@@ -67,18 +78,45 @@ ZOOMOUT_SAMPLES = 2000
 #: and of ``refined`` 94.95 / 94.98 / 95.10 % (docs/results.md, "ZoomOut's step").
 ZOOMOUT_STEP = 2
 
+#: Initial estimates :func:`estimate_map` tries without landmarks, ``(k₀, WKS variance)``: each
+#: is estimated at ``k₀ × k₀`` with WKS of that ``variance`` (σ in units of the energy range over
+#: the 100 energies), refined by ZoomOut, and the map of least geodesic distortion among those
+#: of the best orientation is kept (:func:`bsfjax.choose_map`).  Without landmarks a single
+#: start lands in a partly mirrored or slid map on 5 of the 9 pairs of docs/results.md ("Without
+#: landmarks"), and which start does differs from pair to pair.
+LANDMARK_FREE_STARTS = tuple((k0, v) for k0 in (16, 20, 24, 30, 40) for v in (3.5, 7.0, 14.0))
+
+#: The WKS variance of a single start (with landmarks): pyFM's.
+WKS_VARIANCE = 7.0
+
+#: Landmark pairs :func:`estimate_map` reads off its chosen map without landmarks, for a second
+#: estimate.  On the 9 pairs of docs/results.md: SMPL-part accuracy of the pull-back 92.57 %
+#: with none, 94.40 % with 10, 94.47 % with 20 (5 put FAUST 000→010 at 54.6 %: a flip);
+#: with 5 true landmarks 94.46 %.
+DERIVED_LANDMARKS = 20
+
 
 @on_one_blas_thread
 def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=None,
                  refine_to: int | None = None, n_energies: int = 100, source_mesh=None,
                  target_mesh=None, zoomout_samples: int | None = ZOOMOUT_SAMPLES,
-                 zoomout_step: int = ZOOMOUT_STEP) -> MapEstimate:
+                 zoomout_step: int = ZOOMOUT_STEP, starts=None,
+                 derived_landmarks: int = DERIVED_LANDMARKS) -> MapEstimate:
     """Estimate a ``k × k`` functional map from descriptors (and optional landmarks).
 
     WKS descriptors (plus WKS functions centred at the landmarks) with descriptor preservation,
     descriptor commutativity and Laplacian commutativity (:func:`bsfjax.estimate_fmap`), then
     ZoomOut to ``refine_to`` eigenpairs (default: as many as both spectra have), and back to a
     ``k × k`` map from the refined point map.
+
+    Without landmarks but with the meshes this runs from several starts (``starts``) and keeps
+    the map of least geodesic distortion among those of the best orientation
+    (:func:`bsfjax.choose_map`): one start often lands in a partly mirrored map (both arms
+    swapped) or a slid one (a leg on a foot), and which start does depends on the pair.  Then
+    it reads ``derived_landmarks`` landmark pairs off that map (the source's farthest points,
+    each with the target vertex whose image lies nearest), estimates again with them as if they
+    were given, and keeps the second map if :func:`bsfjax.choose_map` prefers it.  On the 9 FAUST / FAUST_5k pairs of
+    docs/results.md ("Without landmarks") this is as accurate as 5 true landmarks.
 
     Args:
         source, target: spectra with at least ``max(k, refine_to)`` eigenpairs.
@@ -88,12 +126,19 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
         source_mesh, target_mesh: the :class:`~bsfjax.Mesh` of each spectrum.  Without
             landmarks they switch on the orientation-preserving term of
             :func:`bsfjax.estimate_fmap` (weight :data:`ORIENT_WEIGHT`), which tells a shape
-            from its mirror image.  They also give ZoomOut its samples (below).
+            from its mirror image, and the choice among ``starts``.  They also give ZoomOut its
+            samples (below).
         zoomout_samples: with the meshes, ZoomOut runs on this many farthest-point samples of
             each shape (:func:`bsfjax.subsample`; :data:`ZOOMOUT_SAMPLES`); ``None``, or no
             meshes: on every vertex.  The final point map is always over every vertex.
         zoomout_step: eigenpairs added per ZoomOut iteration (:data:`ZOOMOUT_STEP`; 1 is
             ZoomOut's original schedule).
+        starts: ``(k₀, variance)`` pairs, each an initial ``k₀ × k₀`` estimate with WKS of that
+            variance (``wks(…, variance=)``); those with ``k₀ > refine_to`` are skipped.
+            Default: :data:`LANDMARK_FREE_STARTS` without landmarks when the meshes are given,
+            else the single start ``((k, WKS_VARIANCE),)``.  Several starts need the meshes.
+        derived_landmarks: landmark pairs read off the kept start's map for the second
+            estimate (:data:`DERIVED_LANDMARKS`; 0: none).  Used only with several starts.
     """
     km = min(source.k, target.k)
     if not isinstance(k, (int, np.integer)) or not 1 <= k <= km:
@@ -103,30 +148,94 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
         raise BSFError(f"refine_to must be an integer in [{k}, {km}], got {refine_to!r}")
     check_int(zoomout_step, "zoomout_step", 1)
     lm = _check_landmarks(landmarks, source.n_vertices, target.n_vertices)
+    meshes = source_mesh is not None and target_mesh is not None
+    starts = _check_starts(starts, refine_to, ((k, WKS_VARIANCE),),
+                           LANDMARK_FREE_STARTS if lm is None and meshes else None)
+    if len(starts) > 1 and not meshes:
+        raise BSFError("several starts are told apart by the meshes: give source_mesh and "
+                       "target_mesh, or a single start")
+    check_int(derived_landmarks, "derived_landmarks", 0)
     # the estimation runs on the unit-area shapes (float64 rescaling before any float32 cast);
     # the maps are converted back to the given bases at the end
     source, am, target, an = unit_area_pair(source, target)
-    dm = [wks(source, n_energies, k=k)]
-    dn = [wks(target, n_energies, k=k)]
-    if lm is not None:
-        dm.append(wks(source, n_energies, landmarks=lm[0], k=k))
-        dn.append(wks(target, n_energies, landmarks=lm[1], k=k))
-    extra = {}
-    if lm is None and source_mesh is not None and target_mesh is not None:
-        extra = dict(weights=FmapWeights(orient=ORIENT_WEIGHT), source_mesh=source_mesh,
-                     target_mesh=target_mesh)
-    C0 = estimate_fmap(source, target, jnp.concatenate(dm, axis=1), jnp.concatenate(dn, axis=1),
-                       k=k, **extra)
     samples = None
-    if zoomout_samples is not None and source_mesh is not None and target_mesh is not None:
+    if zoomout_samples is not None and meshes:
         samples = (subsample(source_mesh, zoomout_samples), subsample(target_mesh, zoomout_samples))
-    C_ref = zoomout(C0, source, target, refine_to, step=zoomout_step, samples=samples) \
-        if refine_to > k else C0
-    p2p = np.asarray(fmap_to_p2p(C_ref, source, target))
+
+    def run(start, lm):
+        """One start: the estimate at ``k₀``, ZoomOut to ``refine_to``, the point map."""
+        k0, variance = start
+        dm = [wks(source, n_energies, k=k0, variance=variance)]
+        dn = [wks(target, n_energies, k=k0, variance=variance)]
+        extra = {}
+        if lm is not None:
+            dm.append(wks(source, n_energies, landmarks=lm[0], k=k0, variance=variance))
+            dn.append(wks(target, n_energies, landmarks=lm[1], k=k0, variance=variance))
+        elif meshes:
+            extra = dict(weights=FmapWeights(orient=ORIENT_WEIGHT), source_mesh=source_mesh,
+                         target_mesh=target_mesh)
+        C0 = estimate_fmap(source, target, jnp.concatenate(dm, axis=1),
+                           jnp.concatenate(dn, axis=1), k=k0, **extra)
+        C_ref = zoomout(C0, source, target, refine_to, step=zoomout_step, samples=samples) \
+            if refine_to > k0 else C0
+        return C0, np.asarray(fmap_to_p2p(C_ref, source, target))
+
+    runs = [run(s, lm) for s in starts]
+    quality = {}
+    if len(runs) > 1:
+        maps = np.stack([p for _, p in runs])
+        dist = map_distortion(source_mesh, target_mesh, maps)
+        orient = orientation_agreement(source_mesh, target_mesh, maps)
+        best = choose_map(dist, orient)
+        quality = dict(start=starts[best], distortion=float(dist[best]),
+                       orientation=float(orient[best]))
+        runs = [runs[best]]
+        if derived_landmarks:  # a second estimate, with landmarks read off the kept map
+            derived = _landmarks_from_map(source_mesh, runs[0][1], derived_landmarks)
+            second = run((k, WKS_VARIANCE), derived)
+            d2 = map_distortion(source_mesh, target_mesh, second[1])
+            o2 = orientation_agreement(source_mesh, target_mesh, second[1])
+            if choose_map([quality["distortion"], d2], [quality["orientation"], o2]) == 1:
+                runs = [second]
+                quality.update(landmarks=derived, distortion=d2, orientation=o2)
+    C0, p2p = runs[0]
     C = np.asarray(fmap_from_p2p(source.truncate(k), target.truncate(k), p2p))
     back = lambda X: np.asarray(map_to_unit_area(np.asarray(X), am, an, inverse=True),  # noqa: E731
                                 np.asarray(X).dtype)
-    return MapEstimate(C=back(C), p2p=p2p, C_initial=back(C0), samples=samples)
+    return MapEstimate(C=back(C), p2p=p2p, C_initial=back(C0), samples=samples, **quality)
+
+
+def _landmarks_from_map(source_mesh, p2p, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` landmark pairs read off a point map ``T: N → M``: the source's ``n`` farthest
+    points (Euclidean, seed 0), each with the target vertex whose image ``T(j)`` lies nearest
+    to it in the source's space (of several with that image, the first)."""
+    src = np.asarray(farthest_point_sampling(source_mesh, n), np.int64)
+    v = np.asarray(source_mesh.vertices, np.float64)
+    images, first = np.unique(np.asarray(p2p), return_index=True)  # (ties: the first target)
+    return src, first[cKDTree(v[images]).query(v[src])[1]].astype(np.int64)
+
+
+def _check_starts(starts, refine_to: int, single: tuple, default) -> tuple:
+    """The ``(k₀, variance)`` starts with ``k₀ ≤ refine_to``, checked; ``None`` gives
+    ``default`` (or ``single`` where ``default`` is ``None`` or has no such start)."""
+    given = starts is not None
+    try:
+        pairs = [tuple(p) for p in (starts if given else default or single)]
+    except TypeError:
+        raise BSFError(f"starts must be a sequence of (k0, variance) pairs, got {starts!r}") \
+            from None
+    out = []
+    for p in pairs:
+        if len(p) != 2:
+            raise BSFError(f"starts must be (k0, variance) pairs, got {p!r}")
+        k0 = check_int(p[0], "a start's k0", 1)
+        out.append((k0, check_real(p[1], "a start's WKS variance", positive=True)))
+    kept = tuple(p for p in dict.fromkeys(out) if p[0] <= refine_to)
+    if not kept:
+        if given:
+            raise BSFError(f"no start has k0 <= refine_to = {refine_to}: {starts!r}")
+        kept = single
+    return kept
 
 
 @on_one_blas_thread

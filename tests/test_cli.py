@@ -192,6 +192,15 @@ def test_example_command_writes_a_pair_that_transfer_reads(tmp_path, capsys):
     mass = bsfjax.spectrum(pair.target, 2).mass
     assert reported == pytest.approx(np.sum(mass * (got == pair.labels)) / np.sum(mass), abs=1e-3)
     assert reported > 0.8
+    # without landmarks: the map is chosen among starts, and the command says which it kept
+    with pytest.warns(UserWarning, match="no --landmarks"):
+        rc = main(["transfer", str(d / "source.ply"), str(d / "target.ply"), "--labels",
+                   str(d / "labels.txt"), "--truth", str(d / "target_labels.txt"), "-k", "20",
+                   "--out", str(out)])
+    assert rc == 0
+    err = capsys.readouterr().err
+    assert "no landmarks: kept start k0 = " in err and "geodesic distortion" in err
+    assert float(err.split("accuracy against")[1].split(":")[1].split("%")[0]) > 90
 
 
 def test_truth_needs_labels_and_the_target_length(cli_files, capsys):

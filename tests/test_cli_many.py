@@ -33,8 +33,11 @@ def files(tmp_path_factory):
 
 
 def _argv(d, out, *targets, extra=()):
+    # --one-start: maps without landmarks through the batched stages these tests are about
+    # (the default's choice among starts is estimate_map's own: tests/test_collection.py)
     return ["transfer", str(d / "src.ply"), *[str(t) for t in targets], "--labels",
-            str(d / "labels.txt"), "--out-dir", str(out), "-k", "10", "--no-progress", *extra]
+            str(d / "labels.txt"), "--out-dir", str(out), "-k", "10", "--no-progress",
+            "--one-start", *extra]
 
 
 @pytest.fixture(scope="module")

@@ -50,8 +50,10 @@ def test_merged_buckets_give_the_unpadded_results():
     targets = [small.target, large.target]
     sizes = _merged_sizes(targets, lambda i: None, small.source.n_vertices)
     assert sizes[0] == sizes[1] == (2048, size_bucket(large.target.n_faces))
+    # one start: the maps from the padded stages (several: estimate_map's, never padded)
     runs = [dict(transfer_collection(small.source, small.labels, targets, method="p2p", k=10,
-                                     zoomout_samples=300, pad=pad)) for pad in (True, False)]
+                                     zoomout_samples=300, pad=pad, starts=((10, 7.0),)))
+            for pad in (True, False)]
     for i in range(2):
         np.testing.assert_array_equal(runs[0][i].p2p, runs[1][i].p2p)
         np.testing.assert_array_equal(runs[0][i].labels, runs[1][i].labels)
@@ -73,7 +75,7 @@ def test_each_target_file_is_read_once(tmp_path, monkeypatch):
         return bsfjax.load_mesh(path)
 
     monkeypatch.setattr(_collection, "load_mesh", counting)
-    kw = dict(method="p2p", k=10, zoomout_samples=300)
+    kw = dict(method="p2p", k=10, zoomout_samples=300, starts=((10, 7.0),))
     from_files = dict(transfer_collection(small.source, small.labels, paths, **kw))
     assert sorted(reads) == sorted(map(str, paths))
     from_meshes = dict(transfer_collection(small.source, small.labels,
@@ -126,6 +128,27 @@ def test_padded_targets_equal_the_one_pair_path(collection):
     assert np.sum(mass * (padded[0].labels == truth)) / mass.sum() > 0.9
 
 
+def test_one_start_runs_targets_without_landmarks_through_the_batched_stages(collection):
+    """``starts=((k, WKS_VARIANCE),)``: a target without landmarks gets the single start's
+    map from the padded stages, equal to estimate_map with that start (and not the default's
+    choice among starts, which is another map here)."""
+    small, targets, _, default = collection
+    one = dict(transfer_collection(small.source, small.labels, targets[:1], method="refined",
+                                   k=10, zoomout_samples=300, starts=((10, 7.0),)))[0]
+    sm, sn = bsfjax.spectrum(small.source, 100), bsfjax.spectrum(targets[0], 100)
+    kw = dict(k=10, refine_to=20, source_mesh=small.source, target_mesh=targets[0],
+              zoomout_samples=300)
+    est = bsfjax.estimate_map(sm.truncate(20), sn.truncate(20), starts=((10, 7.0),), **kw)
+    np.testing.assert_array_equal(one.p2p, est.p2p)
+    np.testing.assert_allclose(one.C, est.C, atol=1e-4)
+    chosen = bsfjax.estimate_map(sm.truncate(20), sn.truncate(20), **kw)
+    assert chosen.start is not None and not np.array_equal(chosen.p2p, est.p2p)
+    np.testing.assert_array_equal(default[0].p2p, chosen.p2p)
+    with pytest.raises(ValueError, match="k0 must be an integer"):
+        next(transfer_collection(small.source, small.labels, targets[:1], k=10,
+                                 starts=((0, 7.0),)))
+
+
 def test_source_operators_follow_each_targets_landmarks():
     """The source's share of the estimation problem is computed once per set of source
     landmarks and reused: a target whose source landmarks differ from
@@ -133,7 +156,7 @@ def test_source_operators_follow_each_targets_landmarks():
     small = bsfjax.example_pair(levels=1)
     lms = [([0, 100, 200, 300],) * 2, ([5, 150, 250, 400],) * 2, ([0, 100, 200, 300],) * 2]
     targets = [small.target] * 3
-    kw = dict(method="p2p", k=10, zoomout_samples=300)
+    kw = dict(method="p2p", k=10, zoomout_samples=300, starts=((10, 7.0),))
     together = dict(transfer_collection(small.source, small.labels, targets, landmarks=lms, **kw))
     for i in (1, 2):
         alone = dict(transfer_collection(small.source, small.labels, [small.target],
@@ -167,7 +190,8 @@ def test_batched_targets_equal_one_at_a_time(x64):
     small = bsfjax.example_pair(levels=1)
     large = bsfjax.example_pair(levels=2)
     targets = [small.target, large.target, small.target, large.target, small.target]
-    kw = dict(method="refined", k=10, zoomout_samples=300)
+    # one start: every map through the batched stages (several: estimate_map's, on the host)
+    kw = dict(method="refined", k=10, zoomout_samples=300, starts=((10, 7.0),))
     with jax.enable_x64(x64):
         one = dict(transfer_collection(small.source, small.labels, targets, **kw))
         two = dict(transfer_collection(small.source, small.labels, targets, batch=2, **kw))
@@ -243,7 +267,7 @@ def test_host_work_overlaps_the_stages_on_one_blas_thread(monkeypatch):
         return solve(mesh, k, **kw)
 
     monkeypatch.setattr(_collection, "spectrum", recording)
-    kw = dict(method="p2p", k=10, zoomout_samples=300)
+    kw = dict(method="p2p", k=10, zoomout_samples=300, starts=((10, 7.0),))
     overlapped = dict(transfer_collection(small.source, small.labels, targets, **kw))
     default = max(lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas")
     # (one device: each target is dispatched once prepared, so the next one overlaps it)

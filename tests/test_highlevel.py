@@ -78,14 +78,86 @@ def test_estimate_map_without_landmarks_uses_the_orientation_term(small_pair):
     mass = np.asarray(sn.mass)
     plain = estimate_map(sm, sn, k=20, refine_to=40)
     oriented = estimate_map(sm, sn, k=20, refine_to=40, source_mesh=pair.source,
-                            target_mesh=pair.target)
+                            target_mesh=pair.target, starts=((20, 7.0),))
     assert not np.allclose(plain.C_initial, oriented.C_initial)
-    acc = np.sum(mass * (pair.labels[oriented.p2p] == pair.labels[gt])) / mass.sum()
-    assert acc > 0.95
+    assert plain.distortion is None and oriented.distortion is None  # one start: no choice
+    for est in (oriented, estimate_map(sm, sn, k=20, refine_to=40, source_mesh=pair.source,
+                                       target_mesh=pair.target)):  # one start, and the default
+        acc = np.sum(mass * (pair.labels[est.p2p] == pair.labels[gt])) / mass.sum()
+        assert acc > 0.95
     with_lm = estimate_map(sm, sn, k=20, refine_to=40, landmarks=([0], [0]),
                            source_mesh=pair.source, target_mesh=pair.target)
     ref = estimate_map(sm, sn, k=20, refine_to=40, landmarks=([0], [0]))
     np.testing.assert_array_equal(with_lm.C, ref.C)  # with landmarks the meshes are unused
+
+
+def test_estimate_map_without_landmarks_keeps_the_best_start(small_pair):
+    """Several starts: the result is the start that :func:`bsfjax.choose_map` picks from the
+    single-start maps' distortion and orientation (an independent route), with those values;
+    the default starts are LANDMARK_FREE_STARTS up to ``refine_to``; bad starts are named."""
+    pair, sm, sn = small_pair
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    starts = ((10, 3.5), (20, 7.0), (30, 14.0), (12, 7.0))
+    single = [estimate_map(sm, sn, k=20, refine_to=40, starts=(s,), **meshes) for s in starts]
+    maps = np.stack([e.p2p for e in single])
+    dist = bsfjax.map_distortion(pair.source, pair.target, maps)
+    orient = bsfjax.orientation_agreement(pair.source, pair.target, maps)
+    best = bsfjax.choose_map(dist, orient)
+    est = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=0, **meshes)
+    np.testing.assert_array_equal(est.p2p, single[best].p2p)
+    np.testing.assert_array_equal(est.C, single[best].C)
+    assert est.start == starts[best] and est.C_initial.shape == (starts[best][0],) * 2
+    assert est.distortion == pytest.approx(dist[best]) and est.orientation == orient[best]
+    assert est.landmarks is None
+    assert len({m.tobytes() for m in maps}) > 1  # the starts reach different maps
+    # k0 above refine_to is skipped: at refine_to = 25 the choice is among the first, second
+    # and fourth start
+    low = estimate_map(sm, sn, k=20, refine_to=25, starts=starts, derived_landmarks=0, **meshes)
+    kept = [starts[i] for i in (0, 1, 3)]
+    maps = np.stack([estimate_map(sm, sn, k=20, refine_to=25, starts=(s,), **meshes).p2p
+                     for s in kept])
+    assert low.start == kept[bsfjax.choose_map(
+        bsfjax.map_distortion(pair.source, pair.target, maps),
+        bsfjax.orientation_agreement(pair.source, pair.target, maps))]
+    with pytest.raises(ValueError, match="several starts are told apart by the meshes"):
+        estimate_map(sm, sn, k=20, refine_to=40, starts=starts)
+    for bad, msg in ((5, "starts must be a sequence"), (((20,),), "starts must be"),
+                     (((0, 7.0),), "k0 must be an integer"),
+                     (((20, -1.0),), "variance must be a positive"),
+                     (((50, 7.0),), "no start has k0 <= refine_to = 40")):
+        with pytest.raises(ValueError, match=msg):
+            estimate_map(sm, sn, k=20, refine_to=40, starts=bad, **meshes)
+
+
+def test_estimate_map_without_landmarks_reads_landmarks_off_its_map(small_pair):
+    """The second estimate: landmarks read off the kept start's map (farthest source points,
+    each with the target vertex whose image is nearest), then estimate_map with them as given
+    landmarks (an independent route); kept only where choose_map prefers it."""
+    pair, sm, sn = small_pair
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    starts = ((10, 3.5), (20, 7.0))
+    first = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=0, **meshes)
+    src = np.asarray(bsfjax.farthest_point_sampling(pair.source, 12))
+    v = np.asarray(pair.source.vertices)
+    near = np.argmin(np.linalg.norm(v[first.p2p][None] - v[src][:, None], axis=2), axis=1)
+    given = estimate_map(sm, sn, k=20, refine_to=40, landmarks=(src, near), **meshes)
+    maps = np.stack([first.p2p, given.p2p])
+    keep = bsfjax.choose_map(bsfjax.map_distortion(pair.source, pair.target, maps),
+                             bsfjax.orientation_agreement(pair.source, pair.target, maps))
+    est = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=12, **meshes)
+    assert est.start == first.start
+    np.testing.assert_array_equal(est.p2p, [first, given][keep].p2p)
+    if keep == 1:
+        np.testing.assert_array_equal(est.landmarks[0], src)
+        np.testing.assert_array_equal(est.landmarks[1], near)
+        np.testing.assert_array_equal(est.C_initial, given.C_initial)
+    else:
+        assert est.landmarks is None
+    # on the example pair (one body in two poses) a right map reads off right landmarks
+    gt = np.asarray(pair.p2p)
+    assert np.mean(gt[near] == src) >= 0.5
+    with pytest.raises(ValueError, match="derived_landmarks must be an integer >= 0"):
+        estimate_map(sm, sn, k=20, refine_to=40, derived_landmarks=-1, **meshes)
 
 
 def test_transfer_labels_refined_default_reports_its_regime(small_pair):

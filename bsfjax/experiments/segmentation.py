@@ -10,7 +10,11 @@ entry taking the label of its Euclidean-nearest named vertex.
 For each pair and each of three maps — ``default`` (what ``bsfjax transfer`` estimates: WKS +
 5 landmarks by Euclidean FPS on the source with their ground-truth images, k = 30, ZoomOut to
 60 on 2000 samples per shape), ``crude`` (k = 20, no refinement, same landmarks) and ``truth`` (the ground-truth point
-map and its functional map) — every method labels the target through the same map, and the
+map and its functional map) — and, when asked for, two maps without landmarks (``no
+landmarks``: what ``bsfjax transfer`` estimates without ``--landmarks``, several starts and
+landmarks read off the kept map; ``no landmarks, one start``: the single start at k = 30 with
+the orientation term that was its estimate until stop 32) — every method labels the target
+through the same map, and the
 rows give: area share labelled correctly, unassigned share, mean and worst per-part IoU
 (area-weighted, over the parts of the true target labelling), accuracy in a band of
 ``BAND`` · √area around the true part borders, and seconds (after the map; first call
@@ -29,7 +33,7 @@ from tqdm.auto import tqdm
 
 from .._errors import BSFError
 from .._fmap import fmap_from_p2p
-from .._highlevel import ZOOMOUT_SAMPLES, estimate_map, transfer_labels
+from .._highlevel import WKS_VARIANCE, ZOOMOUT_SAMPLES, estimate_map, transfer_labels
 from .._mesh import mesh_edges
 from .._refine import REFINE_EIGENPAIRS
 from .._sampling import farthest_point_sampling, subsample
@@ -38,14 +42,16 @@ from ._datasets import Dataset
 from ._io import Report, pivot_markdown
 
 __all__ = ["segmentation_experiment", "segmentation_pair", "load_segmentation", "shape_labels",
-           "label_metrics", "MAPS", "METHODS"]
+           "label_metrics", "MAPS", "DEFAULT_MAPS", "METHODS"]
 
 DEFAULT_KS = (30,)
 DESCRIPTION = ("Segmentation transfer (not in the paper): a template's part labelling carried "
                "to other shapes through the same map by each method; area accuracy, IoU, "
                "border accuracy.")
-#: The maps every method is run through (see the module doc).
-MAPS = ("default", "crude", "truth")
+#: The maps a method can be run through (see the module doc).
+MAPS = ("default", "crude", "truth", "no landmarks", "no landmarks, one start")
+#: The maps every method is run through unless ``maps=`` names others.
+DEFAULT_MAPS = MAPS[:3]
 #: Method labels → (method name, options): the BSF coders with the paper's and the adaptive
 #: frame.
 METHODS = {"p2p": ("p2p", {}), "refined": ("refined", {}), "std": ("std", {}),
@@ -159,13 +165,27 @@ def _kind(a: str, b: str) -> str:
     return "same person" if na // 10 == nb // 10 else "other person"
 
 
-def _maps(sm, sn, gt, k: int, landmarks, meshes) -> dict:
-    """``{map name: (C (k × k), p2p)}`` for the three maps of the module doc."""
-    d = estimate_map(sm.truncate(2 * k), sn.truncate(2 * k), k=k, landmarks=landmarks,
-                     refine_to=2 * k, source_mesh=meshes[0], target_mesh=meshes[1])
-    c = estimate_map(sm.truncate(20), sn.truncate(20), k=20, landmarks=landmarks, refine_to=20)
-    C_gt = np.asarray(fmap_from_p2p(sm.truncate(k), sn.truncate(k), gt))
-    return {"default": (d.C, d.p2p), "crude": (c.C, c.p2p), "truth": (C_gt, gt)}
+def _maps(sm, sn, gt, k: int, landmarks, meshes, names) -> dict:
+    """``{map name: (C (k × k), p2p)}`` for the maps of the module doc named in ``names``."""
+    mesh_kw = dict(source_mesh=meshes[0], target_mesh=meshes[1])
+    make = {
+        "default": lambda: estimate_map(sm.truncate(2 * k), sn.truncate(2 * k), k=k,
+                                        landmarks=landmarks, refine_to=2 * k, **mesh_kw),
+        "crude": lambda: estimate_map(sm.truncate(20), sn.truncate(20), k=20,
+                                      landmarks=landmarks, refine_to=20),
+        "no landmarks": lambda: estimate_map(sm.truncate(2 * k), sn.truncate(2 * k), k=k,
+                                             refine_to=2 * k, **mesh_kw),
+        "no landmarks, one start": lambda: estimate_map(
+            sm.truncate(2 * k), sn.truncate(2 * k), k=k, refine_to=2 * k,
+            starts=((k, WKS_VARIANCE),), **mesh_kw)}
+    out = {}
+    for name in names:
+        if name == "truth":
+            out[name] = (np.asarray(fmap_from_p2p(sm.truncate(k), sn.truncate(k), gt)), gt)
+        else:
+            est = make[name]()
+            out[name] = (est.C, est.p2p)
+    return out
 
 
 def _check_choices(methods, maps) -> None:
@@ -178,7 +198,8 @@ def _check_choices(methods, maps) -> None:
 
 
 def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k: int = 30,
-                            methods=tuple(METHODS), maps=MAPS, seed: int = 0, cache_dir=None,
+                            methods=tuple(METHODS), maps=DEFAULT_MAPS, seed: int = 0,
+                            cache_dir=None,
                             pair_list=None, keep_labels: int = 1,
                             progress: bool = True) -> list[dict]:
     """Every method × map on ``pairs`` pairs (or the ``(source, target)`` indices of
@@ -189,7 +210,8 @@ def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k
         segmentation: template segmentation file (:func:`load_segmentation`).
         pairs, seed: number of pairs drawn by :meth:`Dataset.pairs`.
         k: basis size of the maps and of the spectral methods (spectra: ``K_SPECTRA``).
-        methods, maps: subsets of :data:`METHODS` and :data:`MAPS`.
+        methods, maps: subsets of :data:`METHODS` and :data:`MAPS` (default
+            :data:`DEFAULT_MAPS`).
         cache_dir: eigenbasis cache folder.
         keep_labels: the first ``keep_labels`` pairs keep their per-vertex labels in the rows
             (keys ``_labels``, ``_truth``, ``_mesh``, not written to the CSV) for the figure.
@@ -217,7 +239,7 @@ def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k
 
 
 def segmentation_pair(sm, sn, meshes, labels_m: np.ndarray, labels_n: np.ndarray,
-                      gt: np.ndarray, *, k: int = 30, methods=tuple(METHODS), maps=MAPS,
+                      gt: np.ndarray, *, k: int = 30, methods=tuple(METHODS), maps=DEFAULT_MAPS,
                       seed: int = 0, names=("source", "target"),
                       keep_labels: bool = False) -> list[dict]:
     """One pair of :func:`segmentation_experiment`: every method through every map.
@@ -235,7 +257,7 @@ def segmentation_pair(sm, sn, meshes, labels_m: np.ndarray, labels_n: np.ndarray
     src_mesh, tgt_mesh = meshes
     lm_src = np.asarray(farthest_point_sampling(src_mesh, N_LANDMARKS, seed=seed))
     landmarks = (lm_src, gt_inverse(gt, lm_src, tgt_mesh, src_mesh))
-    all_maps = _maps(sm, sn, gt, k, landmarks, meshes)
+    all_maps = _maps(sm, sn, gt, k, landmarks, meshes, maps)
     # "refined" continues on the samples the default map's ZoomOut used, whatever the map
     samples = (subsample(src_mesh, ZOOMOUT_SAMPLES), subsample(tgt_mesh, ZOOMOUT_SAMPLES))
     rows = []

@@ -1,0 +1,112 @@
+"""Point-map quality without ground truth: geodesic distortion, orientation, the choice."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+import bsfjax
+from bsfjax import choose_map, map_distortion, orientation_agreement
+
+from .conftest import icosphere
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    v, f = icosphere(3)  # symmetric under x → −x, connectivity included
+    mesh = bsfjax.Mesh(v, f)
+    mirror = cKDTree(v).query(v * [-1, 1, 1])[1]  # the vertex at the reflected position
+    np.testing.assert_allclose(v[mirror], v * [-1, 1, 1], atol=1e-12)
+    return mesh, mirror
+
+
+def reference_distortion(src, tgt, p2p, samples):
+    """float64 reference: scipy's Dijkstra on edge graphs built here, unit areas."""
+    def dist(mesh, idx):
+        v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        w = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+        g = sp.coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(v),) * 2).tocsr()
+        d = dijkstra(g, directed=False, indices=idx)[:, idx]
+        area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]),
+                                    axis=1).sum()
+        return d / np.sqrt(area)
+    dn, dm = dist(tgt, samples), dist(src, p2p[samples])
+    s = len(samples)
+    return np.abs(dm - dn)[~np.eye(s, dtype=bool)].mean()
+
+
+def test_distortion_of_isometries_and_against_a_reference(sphere):
+    """0 for the identity, for the mirror symmetry (an automorphism of the edge graph) and for
+    a copy in other units; a scrambled map against the float64 reference, also batched."""
+    mesh, mirror = sphere
+    n = mesh.n_vertices
+    ident = np.arange(n)
+    assert map_distortion(mesh, mesh, ident) == 0
+    assert map_distortion(mesh, mesh, mirror) == pytest.approx(0, abs=1e-12)
+    big = bsfjax.Mesh(np.asarray(mesh.vertices) * 1000, mesh.faces)
+    assert map_distortion(mesh, big, ident) == pytest.approx(0, abs=1e-12)
+    rng = np.random.default_rng(0)
+    noisy = np.where(rng.random(n) < 0.3, rng.integers(0, n, n), ident)
+    samples = np.asarray(bsfjax.farthest_point_sampling(mesh, 40))
+    ref = reference_distortion(mesh, mesh, noisy, samples)
+    assert ref > 0.05  # a scrambled map is far from isometric
+    assert map_distortion(mesh, mesh, noisy, n_samples=40) == pytest.approx(ref, rel=1e-12)
+    both = map_distortion(mesh, mesh, np.stack([ident, noisy]), n_samples=40)
+    np.testing.assert_allclose(both, [0, ref], rtol=1e-12, atol=1e-15)
+
+
+def test_orientation_of_a_map_its_mirror_and_half_of_each(sphere):
+    """1 for the identity, 0 for the mirror image, about the mirrored area share for a map
+    mirrored on one half; a reflected target with reversed faces is matched by the identity
+    as a mirror image."""
+    mesh, mirror = sphere
+    n = mesh.n_vertices
+    ident = np.arange(n)
+    assert orientation_agreement(mesh, mesh, ident) == 1
+    assert orientation_agreement(mesh, mesh, mirror) == 0
+    v = np.asarray(mesh.vertices)
+    half = np.where(v[:, 0] > 0.3, mirror, ident)  # mirrored on the cap x > 0.3
+    share = orientation_agreement(mesh, mesh, half)
+    f = np.asarray(mesh.faces)
+    inside = (v[f, 0] > 0.3).sum(axis=1)  # vertices of each face on the mirrored cap
+    cap = mesh.face_areas()[inside == 3].sum() / mesh.area
+    seam = mesh.face_areas()[(inside > 0) & (inside < 3)].sum() / mesh.area  # either way
+    assert 0.05 < cap < 0.45 and seam < 0.1
+    assert 1 - cap - seam <= share <= 1 - cap
+    np.testing.assert_array_equal(
+        orientation_agreement(mesh, mesh, np.stack([ident, mirror, half])), [1, 0, share])
+    reflected = bsfjax.Mesh(v * [-1, 1, 1], f[:, ::-1])  # a consistently oriented mirror copy
+    assert orientation_agreement(mesh, reflected, ident) == 0
+    assert orientation_agreement(mesh, reflected, mirror) == 1
+
+
+def test_choose_map():
+    d, o = [0.10, 0.05, 0.02, 0.05], [0.90, 0.85, 0.50, 0.88]
+    assert choose_map(d, o) == 1  # 0.02 is too far below the best orientation
+    assert choose_map(d, o, slack=1.0) == 2
+    assert choose_map(d, o, slack=0.0) == 0
+    assert choose_map([0.05, 0.05], [0.9, 0.9]) == 0  # ties: the first
+    for args, kw, msg in (((d, o[:3]), {}, "two non-empty 1-D arrays of one length"),
+                          (([], []), {}, "two non-empty"),
+                          (([np.nan, 0.1], [0.9, 0.9]), {}, "must be finite"),
+                          ((d, o), {"slack": 1.5}, r"slack must be in \[0, 1\]")):
+        with pytest.raises(ValueError, match=msg):
+            choose_map(*args, **kw)
+
+
+def test_bad_inputs_are_named(sphere):
+    mesh, _ = sphere
+    n = mesh.n_vertices
+    for fn in (map_distortion, orientation_agreement):
+        with pytest.raises(ValueError, match=r"p2p must have shape \(642,\) or \(B, 642\)"):
+            fn(mesh, mesh, np.arange(n - 1))
+        with pytest.raises(ValueError, match="p2p"):
+            fn(mesh, mesh, np.full(n, n))
+        with pytest.raises(ValueError, match="target_mesh must be a bsfjax.Mesh"):
+            fn(mesh, np.zeros((3, 3)), np.arange(n))
+    with pytest.raises(ValueError, match="n_samples must be an integer >= 2"):
+        map_distortion(mesh, mesh, np.arange(n), n_samples=1)
