@@ -325,7 +325,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         if lm is None and not one_start:  # the choice among starts: estimate_map's own map
             p2p = estimate_map(src_spec.truncate(k_map), spec.truncate(k_map), k=k,
                                refine_to=k_map, source_mesh=source, target_mesh=mesh,
-                               zoomout_samples=zoomout_samples, starts=starts).p2p
+                               zoomout_samples=None if sub is None else (sub_m, sub),
+                               starts=starts).p2p
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t, p2p)
 
     devices = jax.local_devices()

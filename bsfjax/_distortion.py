@@ -18,9 +18,9 @@ keeps the orientation of small triangles.  Two numbers measure this from the mes
   target's faces ``(a, b, c)`` whose images ``(T a, T b, T c)`` (three distinct source vertices)
   turn the same way as the source surface, ``(n_Ta + n_Tb + n_Tc) · ((x_Tb − x_Ta) × (x_Tc −
   x_Ta)) > 0`` with ``n`` the source's area-weighted vertex normals.  A mirror image has
-  agreement near 0, a right map near 1 (0.8–0.93 on FAUST: a vertex-to-vertex map folds some
-  small triangles), a partly mirrored map in between.  Both meshes must be consistently
-  oriented.
+  agreement near 0, a right map near 1 (0.90–0.97 on the FAUST pairs of docs/results.md: a
+  vertex-to-vertex map folds some small triangles), a partly mirrored map in between.  Both
+  meshes must be consistently oriented.
 
 :func:`choose_map` combines them: among maps within ``slack`` of the best orientation, the one
 of least distortion.  :func:`bsfjax.estimate_map` uses it to pick among its starts when it has
@@ -44,7 +44,8 @@ __all__ = ["map_distortion", "orientation_agreement", "choose_map", "DISTORTION_
 DISTORTION_SAMPLES = 100
 
 #: :func:`choose_map` keeps the maps whose orientation agreement is at most this far below the
-#: best one's (right maps on FAUST: 0.80–0.93, partly mirrored ones 0.17–0.72; docs/results.md).
+#: best one's (on the FAUST pairs of docs/results.md: right maps 0.90–0.97, partly mirrored or
+#: slid ones down to 0.34).
 ORIENTATION_SLACK = 0.1
 
 

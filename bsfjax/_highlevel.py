@@ -24,7 +24,7 @@ from ._estimation import FmapWeights, estimate_fmap
 from ._geodesics import geodesic_distances
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._indicators import labels_to_indicators
-from ._sampling import farthest_point_sampling, subsample
+from ._sampling import Subsample, farthest_point_sampling, subsample
 from ._spectrum import Spectrum, map_to_unit_area, unit_area_pair
 from ._threads import on_one_blas_thread
 from ._validate import check_indices, check_int, check_real, check_source_mesh, compact_labels
@@ -115,8 +115,9 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     swapped) or a slid one (a leg on a foot), and which start does depends on the pair.  Then
     it reads ``derived_landmarks`` landmark pairs off that map (the source's farthest points,
     each with the target vertex whose image lies nearest), estimates again with them as if they
-    were given, and keeps the second map if :func:`bsfjax.choose_map` prefers it.  On the 9 FAUST / FAUST_5k pairs of
-    docs/results.md ("Without landmarks") this is as accurate as 5 true landmarks.
+    were given, and keeps the second map if :func:`bsfjax.choose_map` prefers it.  On the 9
+    FAUST / FAUST_5k pairs of docs/results.md ("Without landmarks") this is as accurate as 5
+    true landmarks.
 
     Args:
         source, target: spectra with at least ``max(k, refine_to)`` eigenpairs.
@@ -129,8 +130,9 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
             from its mirror image, and the choice among ``starts``.  They also give ZoomOut its
             samples (below).
         zoomout_samples: with the meshes, ZoomOut runs on this many farthest-point samples of
-            each shape (:func:`bsfjax.subsample`; :data:`ZOOMOUT_SAMPLES`); ``None``, or no
-            meshes: on every vertex.  The final point map is always over every vertex.
+            each shape (:func:`bsfjax.subsample`; :data:`ZOOMOUT_SAMPLES`), or on the given
+            ``(source, target)`` :class:`~bsfjax.Subsample` s; ``None``, or no meshes: on every
+            vertex.  The final point map is always over every vertex.
         zoomout_step: eigenpairs added per ZoomOut iteration (:data:`ZOOMOUT_STEP`; 1 is
             ZoomOut's original schedule).
         starts: ``(k₀, variance)`` pairs, each an initial ``k₀ × k₀`` estimate with WKS of that
@@ -159,18 +161,21 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     # the maps are converted back to the given bases at the end
     source, am, target, an = unit_area_pair(source, target)
     samples = None
-    if zoomout_samples is not None and meshes:
+    if isinstance(zoomout_samples, tuple):  # (the collection's, computed once)
+        samples = _check_samples(zoomout_samples, source.n_vertices, target.n_vertices)
+    elif zoomout_samples is not None and meshes:
         samples = (subsample(source_mesh, zoomout_samples), subsample(target_mesh, zoomout_samples))
 
-    def run(start, lm):
-        """One start: the estimate at ``k₀``, ZoomOut to ``refine_to``, the point map."""
+    def run(start, pairs):
+        """One start with landmark ``pairs`` (or ``None``): the estimate at ``k₀``, ZoomOut to
+        ``refine_to``, the point map."""
         k0, variance = start
         dm = [wks(source, n_energies, k=k0, variance=variance)]
         dn = [wks(target, n_energies, k=k0, variance=variance)]
         extra = {}
-        if lm is not None:
-            dm.append(wks(source, n_energies, landmarks=lm[0], k=k0, variance=variance))
-            dn.append(wks(target, n_energies, landmarks=lm[1], k=k0, variance=variance))
+        if pairs is not None:
+            dm.append(wks(source, n_energies, landmarks=pairs[0], k=k0, variance=variance))
+            dn.append(wks(target, n_energies, landmarks=pairs[1], k=k0, variance=variance))
         elif meshes:
             extra = dict(weights=FmapWeights(orient=ORIENT_WEIGHT), source_mesh=source_mesh,
                          target_mesh=target_mesh)
@@ -213,6 +218,15 @@ def _landmarks_from_map(source_mesh, p2p, n: int) -> tuple[np.ndarray, np.ndarra
     v = np.asarray(source_mesh.vertices, np.float64)
     images, first = np.unique(np.asarray(p2p), return_index=True)  # (ties: the first target)
     return src, first[cKDTree(v[images]).query(v[src])[1]].astype(np.int64)
+
+
+def _check_samples(samples, n_m: int, n_n: int) -> tuple:
+    """Given ``(source, target)`` subsamples, each with one cell per vertex of its shape."""
+    ok = len(samples) == 2 and all(isinstance(s, Subsample) for s in samples)
+    if not ok or samples[0].cells.shape != (n_m,) or samples[1].cells.shape != (n_n,):
+        raise BSFError(f"zoomout_samples must be an int, None, or (source, target) Subsamples "
+                       f"of {n_m} and {n_n} vertices")
+    return samples
 
 
 def _check_starts(starts, refine_to: int, single: tuple, default) -> tuple:

@@ -156,6 +156,16 @@ def test_estimate_map_without_landmarks_reads_landmarks_off_its_map(small_pair):
     # on the example pair (one body in two poses) a right map reads off right landmarks
     gt = np.asarray(pair.p2p)
     assert np.mean(gt[near] == src) >= 0.5
+    # the samples given instead of their number: the same map
+    samples = (bsfjax.subsample(pair.source, 300), bsfjax.subsample(pair.target, 300))
+    for kw in (dict(zoomout_samples=300), dict(zoomout_samples=samples)):
+        np.testing.assert_array_equal(
+            estimate_map(sm, sn, k=20, refine_to=40, starts=starts, **kw, **meshes).p2p,
+            estimate_map(sm, sn, k=20, refine_to=40, starts=starts, zoomout_samples=300,
+                         **meshes).p2p)
+    with pytest.raises(ValueError, match="zoomout_samples must be an int, None, or"):
+        other = bsfjax.subsample(bsfjax.example_pair(levels=1).target, 100)  # 506 vertices
+        estimate_map(sm, sn, k=20, refine_to=40, zoomout_samples=(samples[0], other), **meshes)
     with pytest.raises(ValueError, match="derived_landmarks must be an integer >= 0"):
         estimate_map(sm, sn, k=20, refine_to=40, derived_landmarks=-1, **meshes)
 
