@@ -10,7 +10,9 @@ keeps the orientation of small triangles.  Two numbers measure this from the mes
       | d_M(T x_i, T x_j) / √area(M) − d_N(x_i, x_j) / √area(N) |,
 
   with ``d`` the Dijkstra distance along mesh edges (:func:`bsfjax.geodesic_distances`), each
-  shape at unit area.  A map that slides a whole part elsewhere (an arm onto a leg, a partly
+  shape at unit area; two points in different components count as the shape's largest sampled
+  distance apart (a map that tears a component apart is distorted, and the value stays
+  finite).  A map that slides a whole part elsewhere (an arm onto a leg, a partly
   mirrored limb) tears distances apart where it jumps, so it scores high.  The mirror image of a
   symmetric shape keeps every distance, so it scores as low as the right map: that is what the
   second number is for.
@@ -79,15 +81,23 @@ def map_distortion(source_mesh: Mesh, target_mesh: Mesh, p2p, *,
     maps, single = _check_pair(source_mesh, target_mesh, p2p)
     n_samples = check_int(n_samples, "n_samples", 2)
     s = np.asarray(farthest_point_sampling(target_mesh, min(n_samples, target_mesh.n_vertices)))
-    d_n = geodesic_distances(target_mesh, s)[:, s] / np.sqrt(target_mesh.area)
+    d_n = _capped(geodesic_distances(target_mesh, s)[:, s]) / np.sqrt(target_mesh.area)
     images = maps[:, s]  # (B, s)
     uniq, inv = np.unique(images, return_inverse=True)
     inv = inv.reshape(images.shape)
-    d_u = geodesic_distances(source_mesh, uniq)[:, uniq] / np.sqrt(source_mesh.area)
+    d_u = _capped(geodesic_distances(source_mesh, uniq)[:, uniq]) / np.sqrt(source_mesh.area)
     d_m = d_u[inv[:, :, None], inv[:, None, :]]  # (B, s, s)
     off = ~np.eye(len(s), dtype=bool)
     out = np.abs(d_m - d_n)[:, off].mean(axis=1)
     return float(out[0]) if single else out
+
+
+def _capped(d: np.ndarray) -> np.ndarray:
+    """Distances between components (infinite) set to the largest finite one."""
+    far = ~np.isfinite(d)
+    if far.any():
+        d = np.where(far, d[~far].max(initial=0.0), d)
+    return d
 
 
 def _vertex_normals(mesh: Mesh) -> np.ndarray:

@@ -59,6 +59,30 @@ def test_distortion_of_isometries_and_against_a_reference(sphere):
     np.testing.assert_allclose(both, [0, ref], rtol=1e-12, atol=1e-15)
 
 
+def test_distortion_of_a_mesh_in_two_pieces(sphere):
+    """Two spheres apart: finite values; 0 for the identity and for swapping the two equal
+    spheres; a map that sends one sphere's points across counts each torn pair as the largest
+    sampled distance apart, against the reference with that rule."""
+    mesh, _ = sphere
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    n = len(v)
+    two = bsfjax.Mesh(np.concatenate([v, v + [5, 0, 0]]), np.concatenate([f, f + n]))
+    ident = np.arange(2 * n)
+    swap = np.concatenate([ident[n:], ident[:n]])
+    assert map_distortion(two, two, ident) == 0
+    assert map_distortion(two, two, swap) == pytest.approx(0, abs=1e-12)
+    torn = np.concatenate([ident[:n // 2], ident[n + n // 2:], ident[n:]])  # half of piece 1
+    got = map_distortion(two, two, torn, n_samples=30)
+    assert np.isfinite(got) and got > 0.1
+    samples = np.asarray(bsfjax.farthest_point_sampling(two, 30))
+
+    def dist(idx):  # the reference: the same rule, written out
+        g = bsfjax.geodesic_distances(two, idx)[:, idx]
+        return np.where(np.isfinite(g), g, g[np.isfinite(g)].max()) / np.sqrt(two.area)
+    ref = np.abs(dist(torn[samples]) - dist(samples))[~np.eye(30, dtype=bool)].mean()
+    assert got == pytest.approx(ref, rel=1e-12)
+
+
 def test_orientation_of_a_map_its_mirror_and_half_of_each(sphere):
     """1 for the identity, 0 for the mirror image, about the mirrored area share for a map
     mirrored on one half; a reflected target with reversed faces is matched by the identity
