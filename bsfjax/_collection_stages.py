@@ -22,7 +22,7 @@ from ._descriptors import _wks_jit
 from ._estimation import FmapWeights, _cast, _energy, _Geometry, _setup, _Shape, _shape_ops, \
     _solve, _weights_array
 from ._fmap import _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
-from ._highlevel import ORIENT_WEIGHT, ZOOMOUT_STEP
+from ._highlevel import ORIENT_WEIGHT, WKS_VARIANCE, ZOOMOUT_STEP
 from ._methods import Pair, SpectralProjection
 from ._sampling import Subsample
 from ._spectrum import Spectrum
@@ -106,12 +106,14 @@ def _source_spectrum(rep):
 
 
 def _descriptors(s: Spectrum, lm, cfg: _Config):
-    """WKS of the first ``k`` eigenpairs, and WKS at the landmarks ``lm`` when given."""
+    """WKS of the first ``k`` eigenpairs, and WKS at the landmarks ``lm`` when given (the
+    single start of :func:`bsfjax.estimate_map`: variance ``WKS_VARIANCE``)."""
     k = cfg.k
 
     def w(landmarks):
-        return _wks_jit(s.evals[:k], s.evecs[:, :k], s.mass, None, None, landmarks, 7.0,
-                        n_energies=cfg.n_energies, area_normalize=True, scaled=True)
+        return _wks_jit(s.evals[:k], s.evecs[:, :k], s.mass, None, None, landmarks,
+                        WKS_VARIANCE, n_energies=cfg.n_energies, area_normalize=True,
+                        scaled=True)
     return w(None) if lm is None else jnp.concatenate([w(None), w(lm)], axis=1)
 
 
