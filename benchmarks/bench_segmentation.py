@@ -9,6 +9,7 @@ the ground-truth maps; then times the default transfer (``transfer_labels``, met
     python benchmarks/bench_segmentation.py --out /tmp/seg [--data ../shared/data] [--quick | --quick-maps]
     python benchmarks/bench_segmentation.py --out /tmp/seg --decimated
     python benchmarks/bench_segmentation.py --out /tmp/seg --no-landmarks
+    python benchmarks/bench_segmentation.py --out /tmp/seg --few-landmarks [--held-out]
 
 Writes ``segmentation_bench.csv`` and ``segmentation_bench.md`` into ``--out``.
 
@@ -25,6 +26,15 @@ estimates without ``--landmarks`` (several starts, landmarks read off the kept m
 the single start it estimated until stop 32; then the two estimates' seconds on FAUST 000→010
 (median of ``--repeats`` warm calls, the same run).  Writes ``segmentation_nolandmarks.csv``
 and ``segmentation_nolandmarks.md``.
+
+``--few-landmarks``: p2p and ``refined`` through the maps estimated with none, 1, 2 and the
+default 5 landmarks (the first of the default map's farthest-point landmarks, with their
+ground-truth images): how many a user needs.  Writes ``segmentation_fewlandmarks.csv`` and
+``.md``.
+
+``--held-out``: instead of the nine pairs, ten that no default was chosen on (eight FAUST,
+two FAUST_5k; stop 32's held-out check); with ``--no-landmarks`` or ``--few-landmarks`` (or
+alone: the default map).  The files' names end in ``_heldout``.
 """
 
 from __future__ import annotations
@@ -48,6 +58,10 @@ from bsfjax.experiments.segmentation import (K_SPECTRA, METHODS, load_segmentati
 PAIRS = {"faust": [("000", "001"), ("010", "012"), ("020", "022"), ("000", "010"),
                    ("001", "021"), ("012", "022")],
          "faust_5k": [("000", "001"), ("000", "010"), ("001", "011")]}
+#: Pairs no default was chosen on (``--held-out``).
+HELD_OUT = {"faust": [("000", "012"), ("001", "010"), ("002", "020"), ("011", "021"),
+                      ("021", "002"), ("022", "011"), ("002", "012"), ("010", "001")],
+            "faust_5k": [("001", "010"), ("011", "000")]}
 FAST = ("p2p", "refined", "std", "omp", "lstsq")
 REDUCTIONS = (0.5, 0.7, 0.85)
 
@@ -91,7 +105,7 @@ def decimated(data: Path, seg: Path, out: Path, cache) -> int:
     return 0
 
 
-def no_landmarks_report(rows, data: Path, out: Path, args) -> int:
+def no_landmarks_report(rows, data: Path, out: Path, args, tail: str = "") -> int:
     """``--no-landmarks``: the rows' tables, and both estimates timed on FAUST 000→010."""
     ds = load_dataset(data / "faust")
     src, tgt = ds.shapes[0], ds.shapes[[e.name for e in ds.shapes].index("tr_reg_010")]
@@ -111,7 +125,7 @@ def no_landmarks_report(rows, data: Path, out: Path, args) -> int:
                       f"{'kept' if est.landmarks is not None else 'not kept'}, distortion "
                       f"{est.distortion:.4f}, orientation {est.orientation:.3f}")
     rep = report(rows, (30,))
-    write_csv(rows, out / "segmentation_nolandmarks.csv")
+    write_csv(rows, out / f"segmentation_nolandmarks{tail}.csv")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     timing = (f"estimate_map without landmarks on FAUST 000→010 (k = 30, ZoomOut to 60), median "
               f"of {args.repeats} warm calls: " + ", ".join(f"{n} {m:.2f} s" for n, m in
@@ -119,9 +133,21 @@ def no_landmarks_report(rows, data: Path, out: Path, args) -> int:
               f" ({med['several starts (default)'] / med['one start']:.1f}× the one start); "
               f"{chosen}; {os.cpu_count()} CPUs, load average {load:.1f}, "
               f"{platform.machine()}.")
-    (out / "segmentation_nolandmarks.md").write_text(rep.markdown + "\n\n" + timing + "\n")
+    (out / f"segmentation_nolandmarks{tail}.md").write_text(rep.markdown + "\n\n" + timing + "\n")
     print(rep.markdown)
     print(timing)
+    return 0
+
+
+def tables_only(rows, out: Path, stem: str) -> int:
+    """The rows' tables alone, as ``stem.csv`` and ``stem.md``."""
+    rep = report(rows, (30,))
+    for r in rows:
+        for k in [k for k in r if k.startswith("_")]:
+            del r[k]
+    write_csv(rows, out / f"{stem}.csv")
+    (out / f"{stem}.md").write_text(rep.markdown + "\n")
+    print(rep.markdown)
     return 0
 
 
@@ -138,6 +164,10 @@ def main(argv=None) -> int:
                     help="only p2p and refined on the FAUST pairs with decimated targets")
     ap.add_argument("--no-landmarks", action="store_true",
                     help="only p2p and refined through the maps estimated without landmarks")
+    ap.add_argument("--few-landmarks", action="store_true",
+                    help="only p2p and refined through maps with 0, 1, 2 and 5 landmarks")
+    ap.add_argument("--held-out", action="store_true",
+                    help="the ten held-out pairs instead of the nine")
     args = ap.parse_args(argv)
     data = Path(args.data)
     seg = data / "segmentations" / "smpl_vert_segmentation.json"
@@ -146,12 +176,15 @@ def main(argv=None) -> int:
     if args.decimated:
         return decimated(data, seg, out, args.cache)
     rows = []
-    for name, pairs in PAIRS.items():
+    for name, pairs in (HELD_OUT if args.held_out else PAIRS).items():
         ds = load_dataset(data / name)
         index = {e.name: i for i, e in enumerate(ds.shapes)}
         ids = [(index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]) for a, b in pairs]
         free = ("no landmarks", "no landmarks, one start")
+        few = ("no landmarks", "1 landmark", "2 landmarks", "default")
         runs = ([(("p2p", "refined"), free)] if args.no_landmarks else
+                [(("p2p", "refined"), few)] if args.few_landmarks else
+                [(("p2p", "refined"), ("default",))] if args.held_out else
                 [(("p2p", "refined"), ("default",))] if args.quick else
                 [(("p2p", "refined"), ("default", "crude", "truth"))] if args.quick_maps else
                 [(tuple(METHODS), ("default",)), (FAST, ("crude", "truth"))])
@@ -166,8 +199,13 @@ def main(argv=None) -> int:
             rows += part
             print(f"{name} {maps}: {len(part)} rows in {time.perf_counter() - t0:.0f} s",
                   file=sys.stderr)
+    tail = "_heldout" if args.held_out else ""
+    if args.few_landmarks:
+        return tables_only(rows, out, "segmentation_fewlandmarks" + tail)
+    if args.held_out and not args.no_landmarks:
+        return tables_only(rows, out, "segmentation_heldout")
     if args.no_landmarks:
-        return no_landmarks_report(rows, data, out, args)
+        return no_landmarks_report(rows, data, out, args, tail)
     # the default transfer after the map, warm (FAUST 000 -> 010, the CLI's default map)
     ds = load_dataset(data / "faust")
     template, _ = load_segmentation(seg)

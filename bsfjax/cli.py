@@ -329,7 +329,8 @@ def _transfer_one(args) -> int:
         if landmarks is None:
             warnings.warn("no --landmarks: an intrinsically symmetric shape may be matched to its "
                           "mirror image or turned front to back (an orientation term and a choice "
-                          "among several starts make it less likely)", stacklevel=1)
+                          "among several starts make it less likely; two landmark pairs remove "
+                          "it)", stacklevel=1)
         est = estimate_map(sm.truncate(k_map), sn.truncate(k_map), k=k, landmarks=landmarks,
                            refine_to=k_map, source_mesh=source, target_mesh=target,
                            starts=one_start(args, k))

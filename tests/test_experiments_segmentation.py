@@ -131,3 +131,30 @@ def test_remeshed_labels_follow_the_template():
     first = np.unique(e.vts, return_index=True)[1]
     np.testing.assert_array_equal(lab[e.vts[first]], template[sid[first]])
     assert lab.shape == (e.n_vertices,) and lab.min() >= 0
+
+
+def test_fewer_landmarks_are_the_first_of_the_default_ones(tmp_path, monkeypatch):
+    """``1 landmark`` / ``2 landmarks`` estimate with the first one / two of the default map's
+    landmark pairs (FPS on the source, ground-truth images) and nothing else changed: with all
+    of them the call is the default map's."""
+    import bsfjax.experiments.segmentation as seg_mod
+    folder, seg = _example_folder(tmp_path)
+    ds = load_dataset(folder)
+    i, j = ds.pairs(1, 0)[0]
+    calls = []
+    real = seg_mod.estimate_map
+
+    def spy(*args, **kw):
+        calls.append(kw.get("landmarks"))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(seg_mod, "estimate_map", spy)
+    rows = segmentation_experiment(ds, segmentation=seg, pair_list=[(i, j)], k=20,
+                                   methods=("p2p",), progress=False, keep_labels=0,
+                                   maps=("default", "1 landmark", "2 landmarks"))
+    full, one, two = calls
+    assert len(full[0]) == len(full[1]) == seg_mod.N_LANDMARKS
+    for got, n in ((one, 1), (two, 2)):
+        np.testing.assert_array_equal(got[0], full[0][:n])
+        np.testing.assert_array_equal(got[1], full[1][:n])
+    assert [r["map"] for r in rows] == ["default", "1 landmark", "2 landmarks"]

@@ -13,7 +13,9 @@ For each pair and each of three maps — ``default`` (what ``bsfjax transfer`` e
 map and its functional map) — and, when asked for, two maps without landmarks (``no
 landmarks``: what ``bsfjax transfer`` estimates without ``--landmarks``, several starts and
 landmarks read off the kept map; ``no landmarks, one start``: the single start at k = 30 with
-the orientation term that was its estimate until stop 32) — every method labels the target
+the orientation term that was its estimate until stop 32) and two with fewer landmarks (``1
+landmark``, ``2 landmarks``: the default map's estimate with the first one or two of its 5
+landmarks) — every method labels the target
 through the same map, and the
 rows give: area share labelled correctly, unassigned share, mean and worst per-part IoU
 (area-weighted, over the parts of the true target labelling), accuracy in a band of
@@ -49,7 +51,8 @@ DESCRIPTION = ("Segmentation transfer (not in the paper): a template's part labe
                "to other shapes through the same map by each method; area accuracy, IoU, "
                "border accuracy.")
 #: The maps a method can be run through (see the module doc).
-MAPS = ("default", "crude", "truth", "no landmarks", "no landmarks, one start")
+MAPS = ("default", "crude", "truth", "no landmarks", "no landmarks, one start", "1 landmark",
+        "2 landmarks")
 #: The maps every method is run through unless ``maps=`` names others.
 DEFAULT_MAPS = MAPS[:3]
 #: Method labels → (method name, options): the BSF coders with the paper's and the adaptive
@@ -168,9 +171,13 @@ def _kind(a: str, b: str) -> str:
 def _maps(sm, sn, gt, k: int, landmarks, meshes, names) -> dict:
     """``{map name: (C (k × k), p2p)}`` for the maps of the module doc named in ``names``."""
     mesh_kw = dict(source_mesh=meshes[0], target_mesh=meshes[1])
+    first = lambda n: estimate_map(sm.truncate(2 * k), sn.truncate(2 * k), k=k,  # noqa: E731
+                                   landmarks=(landmarks[0][:n], landmarks[1][:n]),
+                                   refine_to=2 * k, **mesh_kw)
     make = {
-        "default": lambda: estimate_map(sm.truncate(2 * k), sn.truncate(2 * k), k=k,
-                                        landmarks=landmarks, refine_to=2 * k, **mesh_kw),
+        "default": lambda: first(N_LANDMARKS),
+        "1 landmark": lambda: first(1),
+        "2 landmarks": lambda: first(2),
         "crude": lambda: estimate_map(sm.truncate(20), sn.truncate(20), k=20,
                                       landmarks=landmarks, refine_to=20),
         "no landmarks": lambda: estimate_map(sm.truncate(2 * k), sn.truncate(2 * k), k=k,
