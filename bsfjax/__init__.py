@@ -15,6 +15,7 @@ owns each step, see ``docs/architecture.md``)::
     transfer    METHODS, BSF, ..., Pair, transfer, transfer_pairs             _methods, _transfer
     maps        wks, hks, estimate_fmap, zoomout, fmap_to_p2p, estimate_map   _fmap, _estimation, ...
                 map_distortion, orientation_agreement, choose_map             _distortion
+                mirror_symmetry                                               _highlevel
     mesh level  transfer_values, transfer_labels                              _highlevel
     collection  transfer_collection (one source to many targets, batched)    _collection
     metrics     relative_error, labels_to_indicators, random_indicators       _metrics, _indicators
@@ -72,8 +73,8 @@ from ._estimation import FmapWeights, estimate_fmap, fmap_energy
 from ._distortion import choose_map, map_distortion, orientation_agreement
 
 # mesh-level entry points
-from ._highlevel import (LabelTransfer, MapEstimate, estimate_map, transfer_labels,
-                         transfer_values)
+from ._highlevel import (LabelTransfer, MapEstimate, estimate_map, mirror_symmetry,
+                         transfer_labels, transfer_values)
 from ._collection import TargetTransfer, size_bucket, transfer_collection
 
 # metrics and test functions
@@ -112,7 +113,7 @@ __all__ = [
     "FmapWeights", "estimate_fmap", "fmap_energy", "map_distortion", "orientation_agreement",
     "choose_map",
     # mesh level
-    "MapEstimate", "estimate_map", "LabelTransfer", "transfer_values", "transfer_labels",
+    "MapEstimate", "estimate_map", "mirror_symmetry", "LabelTransfer", "transfer_values", "transfer_labels",
     "transfer_collection", "TargetTransfer", "size_bucket",
     # metrics
     "relative_error", "indicators_to_labels", "labels_to_indicators", "random_indicators",

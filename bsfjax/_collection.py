@@ -52,7 +52,7 @@ from ._errors import BSFError
 from ._estimation import _geometry
 from ._fmap import _default_chunk
 from ._highlevel import LANDMARK_FREE_STARTS, WKS_VARIANCE, ZOOMOUT_SAMPLES, _check_landmarks, \
-    _check_starts, _regime, estimate_map
+    _check_starts, _regime, estimate_map, mirror_symmetry
 from ._indicators import labels_to_indicators
 from ._mesh import Mesh, load_mesh
 from ._methods import BSF, GeodesicBalls, RefinedPullBack, SaturatedHeat, as_method, \
@@ -232,10 +232,11 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
       farthest-point samples per shape; ``None``: every vertex).
     - ``starts``: as :func:`bsfjax.estimate_map`, for the targets without landmarks: by
       default its several starts, each target's map then estimated by
-      :func:`bsfjax.estimate_map` on the host (accurate, about 5 s for a FAUST-sized target on
-      two cores, compiled per vertex count); ``((k, WKS_VARIANCE),)``, a single start, runs
-      them through the batched stages with the others (16× faster, and less accurate:
-      docs/results.md, "Without landmarks").
+      :func:`bsfjax.estimate_map` on the host with its turn check (accurate, about 7 s for a
+      FAUST-sized target on two cores, compiled per vertex count; the source's
+      :func:`bsfjax.mirror_symmetry` once for all); ``((k, WKS_VARIANCE),)``, a single start,
+      runs them through the batched stages with the others (about 17× faster, and less
+      accurate: docs/results.md, "Without landmarks").
     - ``pad``: pad vertex and face counts to :func:`size_bucket` sizes, merged for a
       collection of at most 64 targets (module doc; ``False``: one compilation per distinct
       count).
@@ -299,7 +300,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             rep["distances"] = np.asarray(geodesic_distances(source, rep["centers"]),
                                           np.float64) / np.sqrt(a0)
     chunk = _default_chunk(n_m)
-    zo_chunk = None
+    zo_chunk = sub_m = None
     if zoomout_samples is not None:
         check_int(zoomout_samples, "zoomout_samples", 1)
         sub_m = subsample(source, zoomout_samples)
@@ -311,6 +312,13 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     one_start = _check_starts(starts, k_map, ((k, WKS_VARIANCE),), LANDMARK_FREE_STARTS) \
         == ((k, WKS_VARIANCE),)
     pending: dict[tuple, list[_Target]] = {}
+    symmetry = []  # the source's mirror symmetry, for estimate_map's turn check: computed once
+
+    def source_symmetry():
+        if not symmetry:
+            symmetry.append(mirror_symmetry(src_spec.truncate(k_map), source, k=k,
+                                            refine_to=k_map, samples=sub_m))
+        return symmetry[0]
 
     def prepare(i, mesh: Mesh, t: float) -> _Target:
         """Target ``i``'s host work (``t``: when its reading began)."""
@@ -326,7 +334,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             p2p = estimate_map(src_spec.truncate(k_map), spec.truncate(k_map), k=k,
                                refine_to=k_map, source_mesh=source, target_mesh=mesh,
                                zoomout_samples=None if sub is None else (sub_m, sub),
-                               starts=starts).p2p
+                               starts=starts, source_symmetry=source_symmetry()).p2p
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t, p2p)
 
     devices = jax.local_devices()

@@ -16,6 +16,13 @@ keeps the orientation of small triangles.  Two numbers measure this from the mes
   mirrored limb) tears distances apart where it jumps, so it scores high.  The mirror image of a
   symmetric shape keeps every distance, so it scores as low as the right map: that is what the
   second number is for.
+
+  With a ``radius`` only the pairs closer than ``radius`` on the target count, each relative to
+  its target distance: the **local distortion** ``|d_M(T x_i, T x_j) − d_N(x_i, x_j)| /
+  d_N(x_i, x_j)``, both at unit area.  It sees what the mean over all pairs averages away: a
+  limb twisted along its length (the front-to-back turn of :func:`bsfjax.estimate_map`)
+  stretches distances between nearby points, while the long distances that dominate the
+  global mean barely change.
 * **orientation agreement** (:func:`orientation_agreement`): the area-weighted share of the
   target's faces ``(a, b, c)`` whose images ``(T a, T b, T c)`` (three distinct source vertices)
   turn the same way as the source surface, ``(n_Ta + n_Tb + n_Tc) · ((x_Tb − x_Ta) × (x_Tc −
@@ -66,7 +73,7 @@ def _check_pair(source_mesh, target_mesh, p2p) -> tuple[np.ndarray, bool]:
 
 
 def map_distortion(source_mesh: Mesh, target_mesh: Mesh, p2p, *,
-                   n_samples: int = DISTORTION_SAMPLES):
+                   n_samples: int = DISTORTION_SAMPLES, radius: float | None = None):
     """Mean geodesic distortion of point map(s) ``T: N → M`` on target samples (module doc).
 
     **Arguments:**
@@ -75,11 +82,17 @@ def map_distortion(source_mesh: Mesh, target_mesh: Mesh, p2p, *,
     - ``p2p``: ``(n_N,)`` source vertex of each target vertex, or ``(B, n_N)`` for ``B`` maps
       (the target's distances are computed once, the source's once per distinct image).
     - ``n_samples``: farthest-point samples of the target (all vertices if fewer).
+    - ``radius``: ``None`` (every pair, absolute differences), or the local distortion over
+      the pairs closer than ``radius`` (in units of √area of the target), relative to their
+      distance on the target.
 
-    **Returns:** a float (or ``(B,)`` floats), 0 for an isometry; in units of √area.
+    **Returns:** a float (or ``(B,)`` floats), 0 for an isometry; in units of √area, or a
+    ratio with a ``radius``.
     """
     maps, single = _check_pair(source_mesh, target_mesh, p2p)
     n_samples = check_int(n_samples, "n_samples", 2)
+    if radius is not None:
+        radius = check_real(radius, "radius", positive=True)
     s = np.asarray(farthest_point_sampling(target_mesh, min(n_samples, target_mesh.n_vertices)))
     d_n = _capped(geodesic_distances(target_mesh, s)[:, s]) / np.sqrt(target_mesh.area)
     images = maps[:, s]  # (B, s)
@@ -87,8 +100,16 @@ def map_distortion(source_mesh: Mesh, target_mesh: Mesh, p2p, *,
     inv = inv.reshape(images.shape)
     d_u = _capped(geodesic_distances(source_mesh, uniq)[:, uniq]) / np.sqrt(source_mesh.area)
     d_m = d_u[inv[:, :, None], inv[:, None, :]]  # (B, s, s)
-    off = ~np.eye(len(s), dtype=bool)
-    out = np.abs(d_m - d_n)[:, off].mean(axis=1)
+    if radius is None:
+        pairs = ~np.eye(len(s), dtype=bool)
+        out = np.abs(d_m - d_n)[:, pairs].mean(axis=1)
+    else:
+        pairs = (d_n > 0) & (d_n < radius)
+        if not pairs.any():
+            raise BSFError(f"no two of the target's {len(s)} samples are closer than radius = "
+                           f"{radius} (in units of √area): give a larger radius or more "
+                           f"samples")
+        out = (np.abs(d_m - d_n)[:, pairs] / d_n[pairs]).mean(axis=1)
     return float(out[0]) if single else out
 
 

@@ -29,8 +29,8 @@ from ._spectrum import Spectrum, map_to_unit_area, unit_area_pair
 from ._threads import on_one_blas_thread
 from ._validate import check_indices, check_int, check_real, check_source_mesh, compact_labels
 
-__all__ = ["MapEstimate", "estimate_map", "transfer_values", "transfer_labels", "LabelTransfer",
-           "REGIMES"]
+__all__ = ["MapEstimate", "estimate_map", "mirror_symmetry", "transfer_values",
+           "transfer_labels", "LabelTransfer", "REGIMES"]
 
 class MapEstimate(NamedTuple):
     C: np.ndarray  #: ``(k, k)`` functional map source → target
@@ -48,6 +48,9 @@ class MapEstimate(NamedTuple):
     orientation: float | None = None
     start: tuple | None = None
     landmarks: tuple | None = None
+    #: with several starts and the turn check: whether the kept map is the alternative with
+    #: left and right swapped (the chosen map was turned front to back); ``None`` otherwise
+    swapped: bool | None = None
 
 
 def _check_landmarks(landmarks, n_m: int, n_n: int):
@@ -89,6 +92,15 @@ LANDMARK_FREE_STARTS = tuple((k0, v) for k0 in (16, 20, 24, 30, 40) for v in (3.
 #: The WKS variance of a single start (with landmarks): pyFM's.
 WKS_VARIANCE = 7.0
 
+#: The turn check of :func:`estimate_map` without landmarks (docs/results.md, "The turn
+#: check"): landmark pairs read off the kept map at the source's farthest points (the tips of
+#: the limbs, where a turn swaps left and right), then moved to their mirror images by the
+#: source's intrinsic symmetry; and the local distortion (:func:`bsfjax.map_distortion` with
+#: ``radius``, on that many target samples) that tells the kept map from the alternative.
+TURN_LANDMARKS = 5
+TURN_SAMPLES = 200
+TURN_RADIUS = 0.15
+
 #: Landmark pairs :func:`estimate_map` reads off its chosen map without landmarks, for a second
 #: estimate.  On the 9 pairs of docs/results.md: SMPL-part accuracy of the pull-back 92.57 %
 #: with none, 94.40 % with 10, 94.47 % with 20 (5 put FAUST 000→010 at 54.6 %: a flip);
@@ -101,7 +113,8 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
                  refine_to: int | None = None, n_energies: int = 100, source_mesh=None,
                  target_mesh=None, zoomout_samples: int | None = ZOOMOUT_SAMPLES,
                  zoomout_step: int = ZOOMOUT_STEP, starts=None,
-                 derived_landmarks: int = DERIVED_LANDMARKS) -> MapEstimate:
+                 derived_landmarks: int = DERIVED_LANDMARKS,
+                 turn_check: bool = True, source_symmetry=None) -> MapEstimate:
     """Estimate a ``k × k`` functional map from descriptors (and optional landmarks).
 
     WKS descriptors (plus WKS functions centred at the landmarks) with descriptor preservation,
@@ -118,6 +131,15 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     were given, and keeps the second map if :func:`bsfjax.choose_map` prefers it.  On the 9
     FAUST / FAUST_5k pairs of docs/results.md ("Without landmarks") this is as accurate as 5
     true landmarks.
+
+    Two human shapes can also be matched turned front to back (left and right limbs swapped, the
+    limbs twisted, the torso turned), a map that keeps orientation and long distances.  The turn
+    check (``turn_check``) builds the alternative: it estimates the source's intrinsic mirror
+    symmetry ``S`` (a self-map that reverses orientation), reads :data:`TURN_LANDMARKS`
+    landmark pairs ``(x, y)`` off the kept map, estimates with ``(S x, y)`` and the orientation
+    term, then once more with landmarks read off that map, and keeps whichever of the two maps
+    :func:`bsfjax.choose_map` prefers by local distortion (:data:`TURN_RADIUS`), which a
+    twisted limb raises.
 
     Args:
         source, target: spectra with at least ``max(k, refine_to)`` eigenpairs.
@@ -141,6 +163,10 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
             else the single start ``((k, WKS_VARIANCE),)``.  Several starts need the meshes.
         derived_landmarks: landmark pairs read off the kept start's map for the second
             estimate (:data:`DERIVED_LANDMARKS`; 0: none).  Used only with several starts.
+        turn_check: run the turn check above (only with several starts).
+        source_symmetry: the source's :func:`bsfjax.mirror_symmetry` for the turn check, when
+            it is at hand (``transfer_collection`` computes it once for all its targets);
+            default: computed here with this call's ``k``, ``refine_to`` and samples.
     """
     km = min(source.k, target.k)
     if not isinstance(k, (int, np.integer)) or not 1 <= k <= km:
@@ -157,8 +183,18 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
         raise BSFError("several starts are told apart by the meshes: give source_mesh and "
                        "target_mesh, or a single start")
     check_int(derived_landmarks, "derived_landmarks", 0)
+    if not isinstance(turn_check, (bool, np.bool_)):
+        raise BSFError(f"turn_check must be True or False, got {turn_check!r}")
+    if source_symmetry is not None:
+        source_symmetry = np.asarray(source_symmetry)
+        if source_symmetry.shape != (source.n_vertices,):
+            raise BSFError(f"source_symmetry must have one source vertex per source vertex "
+                           f"({source.n_vertices}), got shape {source_symmetry.shape}")
+        source_symmetry = check_indices(source_symmetry, "source_symmetry", source.n_vertices,
+                                        what="source vertex indices")
     # the estimation runs on the unit-area shapes (float64 rescaling before any float32 cast);
     # the maps are converted back to the given bases at the end
+    source_given = source  # (mirror_symmetry checks its mesh against the given spectrum)
     source, am, target, an = unit_area_pair(source, target)
     samples = None
     if isinstance(zoomout_samples, tuple):  # (the collection's, computed once)
@@ -166,17 +202,18 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     elif zoomout_samples is not None and meshes:
         samples = (subsample(source_mesh, zoomout_samples), subsample(target_mesh, zoomout_samples))
 
-    def run(start, pairs):
+    def run(start, pairs, orient=None):
         """One start with landmark ``pairs`` (or ``None``): the estimate at ``k₀``, ZoomOut to
-        ``refine_to``, the point map."""
+        ``refine_to``, the point map.  The orientation term is on without landmarks (with
+        the meshes), or where ``orient`` says so."""
         k0, variance = start
         dm = [wks(source, n_energies, k=k0, variance=variance)]
         dn = [wks(target, n_energies, k=k0, variance=variance)]
-        extra = {}
         if pairs is not None:
             dm.append(wks(source, n_energies, landmarks=pairs[0], k=k0, variance=variance))
             dn.append(wks(target, n_energies, landmarks=pairs[1], k=k0, variance=variance))
-        elif meshes:
+        extra = {}
+        if meshes and (pairs is None if orient is None else orient):
             extra = dict(weights=FmapWeights(orient=ORIENT_WEIGHT), source_mesh=source_mesh,
                          target_mesh=target_mesh)
         C0 = estimate_fmap(source, target, jnp.concatenate(dm, axis=1),
@@ -184,6 +221,11 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
         C_ref = zoomout(C0, source, target, refine_to, step=zoomout_step, samples=samples) \
             if refine_to > k0 else C0
         return C0, np.asarray(fmap_to_p2p(C_ref, source, target))
+
+    def refined(p2p):
+        """A second estimate, with ``derived_landmarks`` landmarks read off ``p2p``."""
+        pairs = _landmarks_from_map(source_mesh, p2p, derived_landmarks)
+        return pairs, run((k, WKS_VARIANCE), pairs)
 
     runs = [run(s, lm) for s in starts]
     quality = {}
@@ -196,18 +238,78 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
                        orientation=float(orient[best]))
         runs = [runs[best]]
         if derived_landmarks:  # a second estimate, with landmarks read off the kept map
-            derived = _landmarks_from_map(source_mesh, runs[0][1], derived_landmarks)
-            second = run((k, WKS_VARIANCE), derived)
+            derived, second = refined(runs[0][1])
             d2 = map_distortion(source_mesh, target_mesh, second[1])
             o2 = orientation_agreement(source_mesh, target_mesh, second[1])
             if choose_map([quality["distortion"], d2], [quality["orientation"], o2]) == 1:
                 runs = [second]
                 quality.update(landmarks=derived, distortion=d2, orientation=o2)
+        if turn_check:  # the alternative with left and right swapped (docstring)
+            sym = source_symmetry if source_symmetry is not None else mirror_symmetry(
+                source_given, source_mesh, k=k, refine_to=refine_to, n_energies=n_energies,
+                samples=None if samples is None else samples[0], zoomout_step=zoomout_step)
+            x, y = _landmarks_from_map(source_mesh, runs[0][1], TURN_LANDMARKS)
+            alt, alt_landmarks = run((k, WKS_VARIANCE), (sym[x], y), orient=True), (sym[x], y)
+            if derived_landmarks:
+                alt_landmarks, alt = refined(alt[1])
+            both = np.stack([runs[0][1], alt[1]])
+            local = map_distortion(source_mesh, target_mesh, both, n_samples=TURN_SAMPLES,
+                                   radius=TURN_RADIUS)
+            orient = orientation_agreement(source_mesh, target_mesh, both)
+            quality["swapped"] = choose_map(local, orient) == 1
+            if quality["swapped"]:
+                runs = [alt]
+                quality.update(landmarks=alt_landmarks, orientation=float(orient[1]),
+                               distortion=float(map_distortion(source_mesh, target_mesh,
+                                                               alt[1])))
     C0, p2p = runs[0]
     C = np.asarray(fmap_from_p2p(source.truncate(k), target.truncate(k), p2p))
     back = lambda X: np.asarray(map_to_unit_area(np.asarray(X), am, an, inverse=True),  # noqa: E731
                                 np.asarray(X).dtype)
     return MapEstimate(C=back(C), p2p=p2p, C_initial=back(C0), samples=samples, **quality)
+
+
+@on_one_blas_thread
+def mirror_symmetry(spectrum: Spectrum, mesh, *, k: int = 30, refine_to: int | None = None,
+                    n_energies: int = 100, samples: int | Subsample | None = ZOOMOUT_SAMPLES,
+                    zoomout_step: int = ZOOMOUT_STEP) -> np.ndarray:
+    """The shape's intrinsic mirror symmetry ``S: M → M``, a self point map that reverses
+    orientation (left ↔ right on a body).
+
+    The functional map of ``M`` to itself from WKS descriptors with the orientation-*reversing*
+    term (:func:`bsfjax.estimate_fmap`, ``orientation="reversing"``, weight
+    :data:`ORIENT_WEIGHT`) at ``k × k``, ZoomOut to ``refine_to``, then the point map: the
+    self-map :func:`bsfjax.estimate_map` would give with the orientation term turned around.
+    On FAUST registrations it maps each SMPL part to its mirror part on 93–99 % of the area.
+    :func:`bsfjax.estimate_map` uses it for its turn check.
+
+    **Arguments:**
+
+    - ``spectrum``, ``mesh``: the shape (``refine_to`` eigenpairs at least).
+    - ``k``, ``refine_to``, ``n_energies``, ``zoomout_step``: as in
+      :func:`bsfjax.estimate_map` (``refine_to`` default: the spectrum's size).
+    - ``samples``: ZoomOut on this many farthest-point samples (:func:`bsfjax.subsample`), on
+      a given :class:`~bsfjax.Subsample`, or on every vertex (``None``).
+
+    **Returns:** ``(n,)`` int array, ``S[i]`` the mirror image of vertex ``i``.
+    """
+    if not isinstance(spectrum, Spectrum):
+        raise BSFError(f"spectrum must be a bsfjax.Spectrum, got {type(spectrum).__name__}")
+    check_source_mesh(mesh, spectrum.n_vertices, spectrum.mass)
+    refine_to = spectrum.k if refine_to is None else refine_to
+    if not isinstance(k, (int, np.integer)) or not 1 <= k <= spectrum.k:
+        raise BSFError(f"k must be an integer in [1, {spectrum.k}], got {k!r}")
+    if not isinstance(refine_to, (int, np.integer)) or not k <= refine_to <= spectrum.k:
+        raise BSFError(f"refine_to must be an integer in [{k}, {spectrum.k}], got {refine_to!r}")
+    if samples is not None and not isinstance(samples, Subsample):
+        samples = subsample(mesh, check_int(samples, "samples", 1))
+    d = wks(spectrum, n_energies, k=k, variance=WKS_VARIANCE)
+    C0 = estimate_fmap(spectrum, spectrum, d, d, k=k, weights=FmapWeights(orient=ORIENT_WEIGHT),
+                       source_mesh=mesh, target_mesh=mesh, orientation="reversing")
+    C = zoomout(C0, spectrum, spectrum, refine_to, step=zoomout_step,
+                samples=None if samples is None else (samples, samples)) \
+        if refine_to > k else C0
+    return np.asarray(fmap_to_p2p(C, spectrum, spectrum)).astype(np.int64)
 
 
 def _landmarks_from_map(source_mesh, p2p, n: int) -> tuple[np.ndarray, np.ndarray]:

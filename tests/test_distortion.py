@@ -23,8 +23,9 @@ def sphere():
     return mesh, mirror
 
 
-def reference_distortion(src, tgt, p2p, samples):
-    """float64 reference: scipy's Dijkstra on edge graphs built here, unit areas."""
+def reference_distortion(src, tgt, p2p, samples, radius=None):
+    """float64 reference: scipy's Dijkstra on edge graphs built here, unit areas; with a
+    ``radius``, the relative error over the pairs closer than it on the target."""
     def dist(mesh, idx):
         v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
         e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
@@ -36,7 +37,33 @@ def reference_distortion(src, tgt, p2p, samples):
         return d / np.sqrt(area)
     dn, dm = dist(tgt, samples), dist(src, p2p[samples])
     s = len(samples)
+    if radius is not None:
+        near = (dn > 0) & (dn < radius)
+        return (np.abs(dm - dn)[near] / dn[near]).mean()
     return np.abs(dm - dn)[~np.eye(s, dtype=bool)].mean()
+
+
+def test_local_distortion_against_a_reference(sphere):
+    """With a radius: 0 for the isometries, the float64 reference's relative error over the
+    near pairs for a scrambled map (batched too), and a clear error for a radius that keeps no
+    pair or is not a positive number."""
+    mesh, mirror = sphere
+    n = mesh.n_vertices
+    ident = np.arange(n)
+    assert map_distortion(mesh, mesh, mirror, radius=0.3) == pytest.approx(0, abs=1e-12)
+    rng = np.random.default_rng(1)
+    noisy = np.where(rng.random(n) < 0.1, rng.integers(0, n, n), ident)
+    samples = np.asarray(bsfjax.farthest_point_sampling(mesh, 60))
+    ref = reference_distortion(mesh, mesh, noisy, samples, radius=0.3)
+    full = reference_distortion(mesh, mesh, noisy, samples)
+    assert ref > 0.1 and ref != pytest.approx(full, rel=0.1)  # another average
+    got = map_distortion(mesh, mesh, np.stack([ident, noisy]), n_samples=60, radius=0.3)
+    np.testing.assert_allclose(got, [0, ref], rtol=1e-12, atol=1e-15)
+    with pytest.raises(bsfjax.BSFError, match="closer than radius"):
+        map_distortion(mesh, mesh, noisy, n_samples=10, radius=1e-3)
+    for bad in (0, -0.1, float("nan"), True):
+        with pytest.raises(bsfjax.BSFError, match="radius must be"):
+            map_distortion(mesh, mesh, noisy, radius=bad)
 
 
 def test_distortion_of_isometries_and_against_a_reference(sphere):

@@ -9,6 +9,8 @@ import bsfjax
 from bsfjax import estimate_map, transfer_labels, transfer_values
 from bsfjax._demo import example_landmarks
 
+from .conftest import data_path, icosphere
+
 
 @pytest.fixture(scope="module")
 def small_pair():
@@ -103,16 +105,18 @@ def test_estimate_map_without_landmarks_keeps_the_best_start(small_pair):
     dist = bsfjax.map_distortion(pair.source, pair.target, maps)
     orient = bsfjax.orientation_agreement(pair.source, pair.target, maps)
     best = bsfjax.choose_map(dist, orient)
-    est = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=0, **meshes)
+    est = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=0,
+                       turn_check=False, **meshes)
     np.testing.assert_array_equal(est.p2p, single[best].p2p)
     np.testing.assert_array_equal(est.C, single[best].C)
     assert est.start == starts[best] and est.C_initial.shape == (starts[best][0],) * 2
     assert est.distortion == pytest.approx(dist[best]) and est.orientation == orient[best]
-    assert est.landmarks is None
+    assert est.landmarks is None and est.swapped is None
     assert len({m.tobytes() for m in maps}) > 1  # the starts reach different maps
     # k0 above refine_to is skipped: at refine_to = 25 the choice is among the first, second
     # and fourth start
-    low = estimate_map(sm, sn, k=20, refine_to=25, starts=starts, derived_landmarks=0, **meshes)
+    low = estimate_map(sm, sn, k=20, refine_to=25, starts=starts, derived_landmarks=0,
+                       turn_check=False, **meshes)
     kept = [starts[i] for i in (0, 1, 3)]
     maps = np.stack([estimate_map(sm, sn, k=20, refine_to=25, starts=(s,), **meshes).p2p
                      for s in kept])
@@ -136,7 +140,8 @@ def test_estimate_map_without_landmarks_reads_landmarks_off_its_map(small_pair):
     pair, sm, sn = small_pair
     meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
     starts = ((10, 3.5), (20, 7.0))
-    first = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=0, **meshes)
+    first = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=0,
+                         turn_check=False, **meshes)
     src = np.asarray(bsfjax.farthest_point_sampling(pair.source, 12))
     v = np.asarray(pair.source.vertices)
     near = np.argmin(np.linalg.norm(v[first.p2p][None] - v[src][:, None], axis=2), axis=1)
@@ -144,7 +149,8 @@ def test_estimate_map_without_landmarks_reads_landmarks_off_its_map(small_pair):
     maps = np.stack([first.p2p, given.p2p])
     keep = bsfjax.choose_map(bsfjax.map_distortion(pair.source, pair.target, maps),
                              bsfjax.orientation_agreement(pair.source, pair.target, maps))
-    est = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=12, **meshes)
+    est = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=12,
+                       turn_check=False, **meshes)
     assert est.start == first.start
     np.testing.assert_array_equal(est.p2p, [first, given][keep].p2p)
     if keep == 1:
@@ -168,6 +174,90 @@ def test_estimate_map_without_landmarks_reads_landmarks_off_its_map(small_pair):
         estimate_map(sm, sn, k=20, refine_to=40, zoomout_samples=(samples[0], other), **meshes)
     with pytest.raises(ValueError, match="derived_landmarks must be an integer >= 0"):
         estimate_map(sm, sn, k=20, refine_to=40, derived_landmarks=-1, **meshes)
+
+
+def test_estimate_map_turn_check_keeps_what_choose_map_prefers(small_pair):
+    """The turn check keeps the map without it, or an alternative that ``choose_map`` prefers
+    to it by local distortion (at TURN_RADIUS on TURN_SAMPLES samples) and orientation; with
+    landmarks or one start it does not run; a non-bool is named."""
+    from bsfjax._highlevel import TURN_RADIUS, TURN_SAMPLES
+    pair, sm, sn = small_pair
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    starts = ((10, 3.5), (20, 7.0))
+    kw = dict(k=20, refine_to=40, starts=starts, derived_landmarks=12, **meshes)
+    without = estimate_map(sm, sn, turn_check=False, **kw)
+    est = estimate_map(sm, sn, **kw)
+    assert isinstance(est.swapped, bool) and est.start == without.start
+    if not est.swapped:
+        np.testing.assert_array_equal(est.p2p, without.p2p)
+        assert est.distortion == without.distortion
+    else:
+        both = np.stack([without.p2p, est.p2p])
+        local = bsfjax.map_distortion(pair.source, pair.target, both, n_samples=TURN_SAMPLES,
+                                      radius=TURN_RADIUS)
+        orient = bsfjax.orientation_agreement(pair.source, pair.target, both)
+        assert bsfjax.choose_map(local, orient) == 1
+    one = estimate_map(sm, sn, k=20, refine_to=40, starts=((20, 7.0),), **meshes)
+    assert one.swapped is None
+    with pytest.raises(ValueError, match="turn_check must be True or False"):
+        estimate_map(sm, sn, turn_check="yes", **kw)
+
+
+def test_turn_check_unturns_a_faust_pair():
+    """FAUST 001 → 010 (two people) without landmarks: the choice among starts lands on a map
+    turned front to back (about a third of the SMPL parts right: the torso bands); the turn
+    check swaps it for the right one.  The source's mirror symmetry it uses maps each SMPL
+    part to its mirror part."""
+    from bsfjax.experiments.segmentation import load_segmentation
+    seg = data_path("segmentations", "smpl_vert_segmentation.json")
+    src = bsfjax.load_mesh(data_path("faust", "tr_reg_001.off"))
+    tgt = bsfjax.load_mesh(data_path("faust", "tr_reg_010.off"))
+    labels, names = load_segmentation(seg)
+    sm, sn = bsfjax.spectrum(src, 60), bsfjax.spectrum(tgt, 60)
+    mirror = {n: n.replace("left", "RIGHT").replace("right", "left").replace("RIGHT", "right")
+              for n in names}
+    mirror_id = np.array([names.index(mirror[n]) for n in names])
+    sym = bsfjax.mirror_symmetry(sm, src, k=30)
+    mass = np.asarray(sm.mass)
+    assert np.sum(mass * (labels[sym] == mirror_id[labels])) / mass.sum() > 0.95
+    assert bsfjax.orientation_agreement(src, src, sym) < 0.2
+    kw = dict(k=30, refine_to=60, source_mesh=src, target_mesh=tgt)
+    mass_n = np.asarray(sn.mass)
+    acc = lambda p: np.sum(mass_n * (labels[p] == labels)) / mass_n.sum()  # noqa: E731
+    est = estimate_map(sm, sn, **kw)
+    assert est.swapped and acc(est.p2p) > 0.9
+    assert acc(estimate_map(sm, sn, turn_check=False, **kw).p2p) < 0.4
+    # the symmetry given (as transfer_collection does) or computed: one map
+    np.testing.assert_array_equal(estimate_map(sm, sn, source_symmetry=sym, **kw).p2p, est.p2p)
+
+
+def test_mirror_symmetry_of_a_shape_with_one_mirror_plane():
+    """An ellipsoid bent so that x → −x is its only symmetry (the icosphere's vertices and
+    faces are symmetric under it): the self-map is that mirror, vertex for vertex, and so
+    reverses orientation and keeps distances (the orientation-preserving estimate would be the
+    identity); bad inputs are named."""
+    from scipy.spatial import cKDTree
+    v, f = icosphere(4)
+    v = v * [1.0, 1.6, 2.3]
+    v = np.c_[v[:, 0], v[:, 1] + 0.25 * v[:, 2] ** 2, v[:, 2] + 0.3 * v[:, 1] ** 2]
+    mesh = bsfjax.Mesh(v, f)
+    mirror = cKDTree(v).query(v * [-1, 1, 1])[1]
+    np.testing.assert_allclose(v[mirror], v * [-1, 1, 1], atol=1e-12)
+    spec = bsfjax.spectrum(mesh, 40)
+    sym = bsfjax.mirror_symmetry(spec, mesh, k=20, samples=None)
+    assert sym.shape == (mesh.n_vertices,) and np.mean(sym == mirror) > 0.99
+    assert bsfjax.orientation_agreement(mesh, mesh, sym) < 0.05
+    assert np.mean(sym == np.arange(mesh.n_vertices)) < 0.05  # only the plane's own points
+    with pytest.raises(ValueError, match="refine_to must be an integer"):
+        bsfjax.mirror_symmetry(spec, mesh, k=20, refine_to=50)
+    with pytest.raises(ValueError, match="vertices but the source spectrum has"):
+        bsfjax.mirror_symmetry(spec, bsfjax.Mesh(*icosphere(2)), k=20)
+    with pytest.raises(ValueError, match="source_symmetry must have one source vertex"):
+        pair = bsfjax.example_pair(levels=1)
+        s1 = bsfjax.spectrum(pair.source, 20)
+        estimate_map(s1, bsfjax.spectrum(pair.target, 20), k=10, refine_to=20,
+                     source_mesh=pair.source, target_mesh=pair.target,
+                     source_symmetry=np.arange(5))
 
 
 def test_transfer_labels_refined_default_reports_its_regime(small_pair):
