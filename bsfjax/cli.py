@@ -339,12 +339,10 @@ def _transfer_one(args) -> int:
         if est.start is not None:
             second = ("" if est.landmarks is None else
                       f", then {len(est.landmarks[0])} landmarks read off its map")
-            turn = (", then swapped left and right: it was turned front to back"
-                    if est.swapped else "")
+            turn = ", then swapped left and right (it was turned)" if est.swapped else ""
             print(f"no landmarks: kept start k0 = {est.start[0]}, WKS variance "
-                  f"{est.start[1]:g}{second}{turn}; geodesic distortion "
-                  f"{est.distortion:.4f}, orientation agreement {est.orientation:.1%}",
-                  file=sys.stderr)
+                  f"{est.start[1]:g}{second}{turn}; geodesic distortion {est.distortion:.4f}, "
+                  f"orientation agreement {est.orientation:.1%}", file=sys.stderr)
     common = dict(C=C, p2p=p2p, method=args.method, mesh=source)
     if args.method == "refined":  # its continuation runs on the samples of the map's ZoomOut
         from ._highlevel import ZOOMOUT_SAMPLES
