@@ -168,12 +168,7 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
             it is at hand (``transfer_collection`` computes it once for all its targets);
             default: computed here with this call's ``k``, ``refine_to`` and samples.
     """
-    km = min(source.k, target.k)
-    if not isinstance(k, (int, np.integer)) or not 1 <= k <= km:
-        raise BSFError(f"k must be an integer in [1, {km}] (the spectra's size), got {k!r}")
-    refine_to = km if refine_to is None else refine_to
-    if not isinstance(refine_to, (int, np.integer)) or not k <= refine_to <= km:
-        raise BSFError(f"refine_to must be an integer in [{k}, {km}], got {refine_to!r}")
+    refine_to = _check_sizes(k, refine_to, min(source.k, target.k))
     check_int(zoomout_step, "zoomout_step", 1)
     lm = _check_landmarks(landmarks, source.n_vertices, target.n_vertices)
     meshes = source_mesh is not None and target_mesh is not None
@@ -296,11 +291,7 @@ def mirror_symmetry(spectrum: Spectrum, mesh, *, k: int = 30, refine_to: int | N
     if not isinstance(spectrum, Spectrum):
         raise BSFError(f"spectrum must be a bsfjax.Spectrum, got {type(spectrum).__name__}")
     check_source_mesh(mesh, spectrum.n_vertices, spectrum.mass)
-    refine_to = spectrum.k if refine_to is None else refine_to
-    if not isinstance(k, (int, np.integer)) or not 1 <= k <= spectrum.k:
-        raise BSFError(f"k must be an integer in [1, {spectrum.k}], got {k!r}")
-    if not isinstance(refine_to, (int, np.integer)) or not k <= refine_to <= spectrum.k:
-        raise BSFError(f"refine_to must be an integer in [{k}, {spectrum.k}], got {refine_to!r}")
+    refine_to = _check_sizes(k, refine_to, spectrum.k)
     if samples is not None and not isinstance(samples, Subsample):
         samples = subsample(mesh, check_int(samples, "samples", 1))
     d = wks(spectrum, n_energies, k=k, variance=WKS_VARIANCE)
@@ -310,6 +301,17 @@ def mirror_symmetry(spectrum: Spectrum, mesh, *, k: int = 30, refine_to: int | N
                 samples=None if samples is None else (samples, samples)) \
         if refine_to > k else C0
     return np.asarray(fmap_to_p2p(C, spectrum, spectrum)).astype(np.int64)
+
+
+def _check_sizes(k, refine_to, km: int) -> int:
+    """``k`` and ``refine_to`` (default ``km``) checked against the ``km`` eigenpairs there
+    are; returns ``refine_to``."""
+    if not isinstance(k, (int, np.integer)) or not 1 <= k <= km:
+        raise BSFError(f"k must be an integer in [1, {km}] (the spectra's size), got {k!r}")
+    refine_to = km if refine_to is None else refine_to
+    if not isinstance(refine_to, (int, np.integer)) or not k <= refine_to <= km:
+        raise BSFError(f"refine_to must be an integer in [{k}, {km}], got {refine_to!r}")
+    return refine_to
 
 
 def _landmarks_from_map(source_mesh, p2p, n: int) -> tuple[np.ndarray, np.ndarray]:
