@@ -93,6 +93,19 @@ def map_distortion(source_mesh: Mesh, target_mesh: Mesh, p2p, *,
     n_samples = check_int(n_samples, "n_samples", 2)
     if radius is not None:
         radius = check_real(radius, "radius", positive=True)
+    out = _distortions(source_mesh, target_mesh, maps, n_samples, radius)
+    if out is None:
+        raise BSFError(f"no two of the target's {min(n_samples, target_mesh.n_vertices)} "
+                       f"samples are closer than radius = {radius} (in units of √area): give "
+                       f"a larger radius or more samples")
+    return float(out[0]) if single else out
+
+
+def _distortions(source_mesh: Mesh, target_mesh: Mesh, maps: np.ndarray, n_samples: int,
+                 radius: float | None) -> np.ndarray | None:
+    """:func:`map_distortion` of checked ``(B, n_N)`` maps; ``None`` where a ``radius`` keeps
+    no pair of samples (a coarse target: :func:`bsfjax.estimate_map` then skips its turn
+    check)."""
     s = np.asarray(farthest_point_sampling(target_mesh, min(n_samples, target_mesh.n_vertices)))
     d_n = _capped(geodesic_distances(target_mesh, s)[:, s]) / np.sqrt(target_mesh.area)
     images = maps[:, s]  # (B, s)
@@ -102,15 +115,11 @@ def map_distortion(source_mesh: Mesh, target_mesh: Mesh, p2p, *,
     d_m = d_u[inv[:, :, None], inv[:, None, :]]  # (B, s, s)
     if radius is None:
         pairs = ~np.eye(len(s), dtype=bool)
-        out = np.abs(d_m - d_n)[:, pairs].mean(axis=1)
-    else:
-        pairs = (d_n > 0) & (d_n < radius)
-        if not pairs.any():
-            raise BSFError(f"no two of the target's {len(s)} samples are closer than radius = "
-                           f"{radius} (in units of √area): give a larger radius or more "
-                           f"samples")
-        out = (np.abs(d_m - d_n)[:, pairs] / d_n[pairs]).mean(axis=1)
-    return float(out[0]) if single else out
+        return np.abs(d_m - d_n)[:, pairs].mean(axis=1)
+    pairs = (d_n > 0) & (d_n < radius)
+    if not pairs.any():
+        return None
+    return (np.abs(d_m - d_n)[:, pairs] / d_n[pairs]).mean(axis=1)
 
 
 def _capped(d: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ from ._methods import (AbstractMethod, BSF, GeodesicBalls, PullBack, RefinedPull
                        SpectralProjection, as_method, method_name)
 from ._transfer import Pair, transfer
 from ._descriptors import wks
-from ._distortion import choose_map, map_distortion, orientation_agreement
+from ._distortion import _distortions, choose_map, map_distortion, orientation_agreement
 from ._errors import BSFError
 from ._estimation import FmapWeights, estimate_fmap
 from ._geodesics import geodesic_distances
@@ -247,11 +247,11 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
             alt, alt_landmarks = run((k, WKS_VARIANCE), (sym[x], y), orient=True), (sym[x], y)
             if derived_landmarks:
                 alt_landmarks, alt = refined(alt[1])
-            both = np.stack([runs[0][1], alt[1]])
-            local = map_distortion(source_mesh, target_mesh, both, n_samples=TURN_SAMPLES,
-                                   radius=TURN_RADIUS)
+            both = np.stack([runs[0][1], alt[1]]).astype(np.int64)
+            local = _distortions(source_mesh, target_mesh, both, TURN_SAMPLES, TURN_RADIUS)
             orient = orientation_agreement(source_mesh, target_mesh, both)
-            quality["swapped"] = choose_map(local, orient) == 1
+            # (a target too coarse for the local distortion keeps the map)
+            quality["swapped"] = local is not None and choose_map(local, orient) == 1
             if quality["swapped"]:
                 runs = [alt]
                 quality.update(landmarks=alt_landmarks, orientation=float(orient[1]),

@@ -199,6 +199,20 @@ def test_estimate_map_turn_check_keeps_what_choose_map_prefers(small_pair):
         assert bsfjax.choose_map(local, orient) == 1
     one = estimate_map(sm, sn, k=20, refine_to=40, starts=((20, 7.0),), **meshes)
     assert one.swapped is None
+
+
+def test_turn_check_keeps_the_map_of_a_target_too_coarse_for_it(small_pair, monkeypatch):
+    """No two target samples closer than the radius (here: a radius below every edge): no
+    local distortion to compare, so the map without the check is kept, not an error."""
+    import bsfjax._highlevel as hl
+    pair, sm, sn = small_pair
+    kw = dict(k=20, refine_to=40, starts=((10, 3.5), (20, 7.0)), source_mesh=pair.source,
+              target_mesh=pair.target)
+    without = estimate_map(sm, sn, turn_check=False, **kw)
+    monkeypatch.setattr(hl, "TURN_RADIUS", 1e-9)
+    est = estimate_map(sm, sn, **kw)
+    assert est.swapped is False
+    np.testing.assert_array_equal(est.p2p, without.p2p)
     with pytest.raises(ValueError, match="turn_check must be True or False"):
         estimate_map(sm, sn, turn_check="yes", **kw)
 
