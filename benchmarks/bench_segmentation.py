@@ -139,13 +139,15 @@ def no_landmarks_report(rows, data: Path, out: Path, args, tail: str = "") -> in
     return 0
 
 
+def _without_labels(rows):
+    """The rows without their per-vertex labels (keys ``_…``, kept for the figure)."""
+    return [{k: v for k, v in r.items() if not k.startswith("_")} for r in rows]
+
+
 def tables_only(rows, out: Path, stem: str) -> int:
     """The rows' tables alone, as ``stem.csv`` and ``stem.md``."""
     rep = report(rows, (30,))
-    for r in rows:
-        for k in [k for k in r if k.startswith("_")]:
-            del r[k]
-    write_csv(rows, out / f"{stem}.csv")
+    write_csv(_without_labels(rows), out / f"{stem}.csv")
     (out / f"{stem}.md").write_text(rep.markdown + "\n")
     print(rep.markdown)
     return 0
@@ -184,8 +186,7 @@ def main(argv=None) -> int:
         few = ("no landmarks", "1 landmark", "2 landmarks", "default")
         runs = ([(("p2p", "refined"), free)] if args.no_landmarks else
                 [(("p2p", "refined"), few)] if args.few_landmarks else
-                [(("p2p", "refined"), ("default",))] if args.held_out else
-                [(("p2p", "refined"), ("default",))] if args.quick else
+                [(("p2p", "refined"), ("default",))] if args.quick or args.held_out else
                 [(("p2p", "refined"), ("default", "crude", "truth"))] if args.quick_maps else
                 [(tuple(METHODS), ("default",)), (FAST, ("crude", "truth"))])
         for methods, maps in runs:
@@ -229,10 +230,7 @@ def main(argv=None) -> int:
     rep = report(rows, (30,))
     if rep.figure is not None:
         rep.figure(out / "segmentation_bench.png")
-    for r in rows:
-        for k in [k for k in r if k.startswith("_")]:
-            del r[k]
-    write_csv(rows, out / "segmentation_bench.csv")
+    write_csv(_without_labels(rows), out / "segmentation_bench.csv")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     med = {name: float(np.median(t[1:])) for name, t in timed.items()}
     timing = (f"Default transfer after the map (transfer_labels, 'refined' on the map's 2000 "
