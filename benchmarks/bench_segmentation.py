@@ -10,6 +10,7 @@ the ground-truth maps; then times the default transfer (``transfer_labels``, met
     python benchmarks/bench_segmentation.py --out /tmp/seg --decimated
     python benchmarks/bench_segmentation.py --out /tmp/seg --no-landmarks
     python benchmarks/bench_segmentation.py --out /tmp/seg --few-landmarks [--held-out]
+    python benchmarks/bench_segmentation.py --out /tmp/seg --all-pairs
 
 Writes ``segmentation_bench.csv`` and ``segmentation_bench.md`` into ``--out``.
 
@@ -35,11 +36,18 @@ ground-truth images): how many a user needs.  Writes ``segmentation_fewlandmarks
 ``--held-out``: instead of the nine pairs, ten that no default was chosen on (eight FAUST,
 two FAUST_5k; stop 32's held-out check); with ``--no-landmarks`` or ``--few-landmarks`` (or
 alone: the default map).  The files' names end in ``_heldout``.
+
+``--all-pairs``: p2p and ``refined`` on every ordered pair of each folder (72 FAUST, 12
+FAUST_5k), through the default map and the map estimated without landmarks (about 11 minutes
+on 2 cores), summarized per folder, map and FAUST pair kind against issue 14's bar (``refined``
+≥ 97 % and ≥ p2p + 1).  Writes ``segmentation_allpairs.csv`` (one row per pair, map and
+method) and ``segmentation_allpairs.md``.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import platform
 import sys
@@ -153,6 +161,34 @@ def tables_only(rows, out: Path, stem: str) -> int:
     return 0
 
 
+def bar_summary(rows) -> str:
+    """``--all-pairs``: per folder, map and pair kind, p2p against ``refined`` pair by pair
+    (means, the gain's mean / worst / best, and how many pairs meet each half of the bar)."""
+    by = {}
+    for r in rows:
+        key = (r["source"], r["target"], r["kind"], r["map"])
+        by.setdefault(key, {})[r["method"]] = r["accuracy"]
+    groups = {}
+    for (src, _, kind, map_name), acc in by.items():
+        folder = src.split("/")[0]
+        for key in ((folder, map_name, "all"), (folder, map_name, kind)):
+            groups.setdefault(key, []).append((acc["p2p"], acc["refined"]))
+    head = ("| folder | map | pair kind | n | p2p % | refined % | gain mean / worst / best | "
+            "refined ≥ 97 % | ≥ p2p + 1 | both | below p2p | lowest refined % |")
+    lines = [head, "|" + "---|" * 12]
+    for (folder, map_name, kind), pairs in sorted(groups.items()):
+        if kind == "-":  # (not FAUST naming: "all" says it)
+            continue
+        p, q = np.array(pairs).T
+        gain = q - p
+        lines.append(f"| {folder} | {map_name} | {kind} | {len(p)} | {p.mean():.2f} | "
+                     f"{q.mean():.2f} | {gain.mean():+.2f} / {gain.min():+.2f} / "
+                     f"{gain.max():+.2f} | {(q >= 97).sum()} | {(gain >= 1).sum()} | "
+                     f"{((q >= 97) & (gain >= 1)).sum()} | {(gain < 0).sum()} | "
+                     f"{q.min():.2f} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -170,6 +206,8 @@ def main(argv=None) -> int:
                     help="only p2p and refined through maps with 0, 1, 2 and 5 landmarks")
     ap.add_argument("--held-out", action="store_true",
                     help="the ten held-out pairs instead of the nine")
+    ap.add_argument("--all-pairs", action="store_true",
+                    help="p2p and refined on every ordered pair, default and landmark-free maps")
     args = ap.parse_args(argv)
     data = Path(args.data)
     seg = data / "segmentations" / "smpl_vert_segmentation.json"
@@ -181,10 +219,13 @@ def main(argv=None) -> int:
     for name, pairs in (HELD_OUT if args.held_out else PAIRS).items():
         ds = load_dataset(data / name)
         index = {e.name: i for i, e in enumerate(ds.shapes)}
-        ids = [(index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]) for a, b in pairs]
+        ids = ([(index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]) for a, b in pairs]
+               if not args.all_pairs else
+               list(itertools.permutations(range(len(ds.shapes)), 2)))
         free = ("no landmarks", "no landmarks, one start")
         few = ("no landmarks", "1 landmark", "2 landmarks", "default")
-        runs = ([(("p2p", "refined"), free)] if args.no_landmarks else
+        runs = ([(("p2p", "refined"), ("default", "no landmarks"))] if args.all_pairs else
+                [(("p2p", "refined"), free)] if args.no_landmarks else
                 [(("p2p", "refined"), few)] if args.few_landmarks else
                 [(("p2p", "refined"), ("default",))] if args.quick or args.held_out else
                 [(("p2p", "refined"), ("default", "crude", "truth"))] if args.quick_maps else
@@ -193,7 +234,8 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             part = segmentation_experiment(ds, segmentation=seg, methods=methods, maps=maps,
                                            cache_dir=args.cache, pair_list=ids,
-                                           keep_labels=1 if name == "faust" else 0,
+                                           keep_labels=int(name == "faust" and
+                                                           not args.all_pairs),
                                            progress=True)
             for r in part:  # the two folders share shape names
                 r["source"] = f"{name}/{r['source']}"
@@ -201,6 +243,12 @@ def main(argv=None) -> int:
             print(f"{name} {maps}: {len(part)} rows in {time.perf_counter() - t0:.0f} s",
                   file=sys.stderr)
     tail = "_heldout" if args.held_out else ""
+    if args.all_pairs:
+        md = bar_summary(rows)
+        write_csv(rows, out / "segmentation_allpairs.csv")
+        (out / "segmentation_allpairs.md").write_text(md + "\n")
+        print(md)
+        return 0
     if args.few_landmarks:
         return tables_only(rows, out, "segmentation_fewlandmarks" + tail)
     if args.held_out and not args.no_landmarks:
