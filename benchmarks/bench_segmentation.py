@@ -8,6 +8,7 @@ the ground-truth maps; then times the default transfer (``transfer_labels``, met
 
     python benchmarks/bench_segmentation.py --out /tmp/seg [--data ../shared/data] [--quick | --quick-maps]
     python benchmarks/bench_segmentation.py --out /tmp/seg --decimated
+    python benchmarks/bench_segmentation.py --out /tmp/seg --stretched
     python benchmarks/bench_segmentation.py --out /tmp/seg --no-landmarks
     python benchmarks/bench_segmentation.py --out /tmp/seg --few-landmarks [--held-out]
     python benchmarks/bench_segmentation.py --out /tmp/seg --all-pairs
@@ -21,6 +22,15 @@ six FAUST pairs with the target decimated by 50, 70 and 85 % (quadric edge colla
 through the three maps. The target's truth is the label of its nearest registration vertex,
 which is also its ground-truth match on the source (the registrations share the vertex
 order). Writes ``segmentation_decimated.csv`` and ``segmentation_decimated.md``.
+
+``--stretched``: shapes that are not in ``../shared/data``: the six FAUST pairs with the
+target's body proportions changed by a smooth non-isometric deformation along its longest
+axis (the standing body's height): taller (heights × 1.15), wider (the two other axes × 1.2),
+and a longer torso (heights between the 45 % and 80 % height quantiles, roughly the hips and
+the shoulders, × 1.3, the rest moved rigidly). The vertex order is kept, so the truth is the
+registration's: the template's labels and the identity correspondence, stretched with the
+body (as the SMPL bands are where the body's proportions differ). p2p and ``refined`` through
+the three maps. Writes ``segmentation_stretched.csv`` and ``segmentation_stretched.md``.
 
 ``--no-landmarks``: p2p and ``refined`` on the nine pairs through the map ``bsfjax transfer``
 estimates without ``--landmarks`` (several starts, landmarks read off the kept map) and through
@@ -113,6 +123,51 @@ def decimated(data: Path, seg: Path, out: Path, cache) -> int:
     return 0
 
 
+def _stretch(vertices: np.ndarray, kind: str) -> np.ndarray:
+    """``--stretched``'s deformations (module doc) of one standing body."""
+    v = np.array(vertices, np.float64)
+    up = int(np.argmax(np.ptp(v, axis=0)))
+    side = [a for a in range(3) if a != up]
+    if kind == "taller":
+        v[:, up] = v[:, up].mean() + 1.15 * (v[:, up] - v[:, up].mean())
+    elif kind == "wider":
+        v[:, side] = v[:, side].mean(axis=0) + 1.2 * (v[:, side] - v[:, side].mean(axis=0))
+    else:  # "longer torso": the band between the two quantiles stretched, the rest moved
+        lo, hi = np.quantile(v[:, up], (0.45, 0.80))
+        v[:, up] += 0.3 * np.clip(v[:, up] - lo, 0.0, hi - lo)
+    return v
+
+
+def stretched(data: Path, seg: Path, out: Path, cache) -> int:
+    """``--stretched``: the six FAUST pairs with re-proportioned targets (see the module doc)."""
+    template, _ = load_segmentation(seg)
+    names = sorted({n for pair in PAIRS["faust"] for n in pair})
+    meshes = {n: bj.load_mesh(data / "faust" / f"tr_reg_{n}.off") for n in names}
+    spectra = {n: bj.spectrum(m, K_SPECTRA, cache_dir=cache) for n, m in meshes.items()}
+    md, rows = [], []
+    for kind in ("taller", "wider", "longer torso"):
+        part = []
+        for a, b in PAIRS["faust"]:
+            src = meshes[a]
+            tgt = bj.Mesh(_stretch(meshes[b].vertices, kind), meshes[b].faces)
+            sn = bj.spectrum(tgt, K_SPECTRA, cache_dir=cache)  # (keyed by the vertices)
+            gt = np.arange(tgt.n_vertices)  # (the registrations share the vertex order)
+            part += segmentation_pair(spectra[a], sn, (src, tgt), template, template, gt,
+                                      methods=("p2p", "refined"),
+                                      names=(f"tr_reg_{a}", f"tr_reg_{b}"))
+            print(f"{a} -> {b} {kind}: " + ", ".join(
+                f"{r['map']} {r['method']} {r['accuracy']:.2f}" for r in part[-6:]),
+                file=sys.stderr)
+        for r in part:
+            r["deformation"] = kind
+        rows += part
+        md += [f"# Targets {kind}", "", report(part, (30,)).markdown, ""]
+    write_csv(rows, out / "segmentation_stretched.csv")
+    (out / "segmentation_stretched.md").write_text("\n".join(md))
+    print("\n".join(md))
+    return 0
+
+
 def no_landmarks_report(rows, data: Path, out: Path, args, tail: str = "") -> int:
     """``--no-landmarks``: the rows' tables, and both estimates timed on FAUST 000→010."""
     ds = load_dataset(data / "faust")
@@ -200,6 +255,8 @@ def main(argv=None) -> int:
                     help="only p2p and refined, through all three maps")
     ap.add_argument("--decimated", action="store_true",
                     help="only p2p and refined on the FAUST pairs with decimated targets")
+    ap.add_argument("--stretched", action="store_true",
+                    help="only p2p and refined on the FAUST pairs with re-proportioned targets")
     ap.add_argument("--no-landmarks", action="store_true",
                     help="only p2p and refined through the maps estimated without landmarks")
     ap.add_argument("--few-landmarks", action="store_true",
@@ -215,6 +272,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if args.decimated:
         return decimated(data, seg, out, args.cache)
+    if args.stretched:
+        return stretched(data, seg, out, args.cache)
     rows = []
     for name, pairs in (HELD_OUT if args.held_out else PAIRS).items():
         ds = load_dataset(data / name)
