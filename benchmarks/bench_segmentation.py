@@ -84,48 +84,59 @@ FAST = ("p2p", "refined", "std", "omp", "lstsq")
 REDUCTIONS = (0.5, 0.7, 0.85)
 
 
-def decimated(data: Path, seg: Path, out: Path, cache) -> int:
-    """``--decimated``: the six FAUST pairs with decimated targets (see the module doc)."""
-    import fast_simplification
-    from scipy.spatial import cKDTree
-
+def changed_targets(data: Path, seg: Path, out: Path, cache, variants, change, key: str,
+                    stem: str) -> int:
+    """The six FAUST pairs with each target changed by ``change(registration, variant)`` →
+    ``(target mesh, its ground-truth map to the registration's vertices)``, for every variant:
+    p2p and ``refined`` through the three maps.  The target's truth is the template's label
+    through that map (the registrations share the vertex order).  Writes ``stem.csv`` and
+    ``stem.md``, the rows tagged ``key`` = the variant."""
     template, _ = load_segmentation(seg)
     names = sorted({n for pair in PAIRS["faust"] for n in pair})
     meshes = {n: bj.load_mesh(data / "faust" / f"tr_reg_{n}.off") for n in names}
     spectra = {n: bj.spectrum(m, K_SPECTRA, cache_dir=cache) for n, m in meshes.items()}
     md, rows = [], []
-    for red in REDUCTIONS:
+    for variant in variants:
         part, sizes = [], []
         for a, b in PAIRS["faust"]:
-            src, reg = meshes[a], meshes[b]
-            v, f = fast_simplification.simplify(np.asarray(reg.vertices, np.float32),
-                                                np.asarray(reg.faces, np.int32),
-                                                target_reduction=red)
-            tgt = bj.Mesh(v.astype(np.float64), f.astype(np.int64))
-            gt = cKDTree(reg.vertices).query(tgt.vertices)[1]  # = source vertex (same order)
+            tgt, gt = change(meshes[b], variant)
             sizes.append(tgt.n_vertices)
-            sn = bj.spectrum(tgt, K_SPECTRA, cache_dir=cache)
-            part += segmentation_pair(spectra[a], sn, (src, tgt), template, template[gt], gt,
-                                      methods=("p2p", "refined"),
+            sn = bj.spectrum(tgt, K_SPECTRA, cache_dir=cache)  # (the cache keys the vertices)
+            part += segmentation_pair(spectra[a], sn, (meshes[a], tgt), template, template[gt],
+                                      gt, methods=("p2p", "refined"),
                                       names=(f"tr_reg_{a}", f"tr_reg_{b}"))
-            print(f"{a} -> {b} at -{100 * red:.0f} % ({tgt.n_vertices} vertices): " + ", ".join(
+            print(f"{a} -> {b}, {key} {variant} ({tgt.n_vertices} vertices): " + ", ".join(
                 f"{r['map']} {r['method']} {r['accuracy']:.2f}" for r in part[-6:]),
                 file=sys.stderr)
         for r in part:
-            r["reduction"] = red
+            r[key] = variant
         rows += part
         span = f"{min(sizes)}" if min(sizes) == max(sizes) else f"{min(sizes)}–{max(sizes)}"
-        md += [f"# Targets decimated by {100 * red:.0f} % ({span} vertices)", "",
+        md += [f"# Targets, {key} {variant} ({span} vertices)", "",
                report(part, (30,)).markdown, ""]
-    write_csv(rows, out / "segmentation_decimated.csv")
-    (out / "segmentation_decimated.md").write_text("\n".join(md))
+    write_csv(rows, out / f"{stem}.csv")
+    (out / f"{stem}.md").write_text("\n".join(md))
     print("\n".join(md))
     return 0
 
 
-def _stretch(vertices: np.ndarray, kind: str) -> np.ndarray:
-    """``--stretched``'s deformations (module doc) of one standing body."""
-    v = np.array(vertices, np.float64)
+def _decimate(reg, reduction: float):
+    """``--decimated``'s target: ``reg`` decimated, each vertex's truth its nearest
+    registration vertex."""
+    import fast_simplification
+    from scipy.spatial import cKDTree
+
+    v, f = fast_simplification.simplify(np.asarray(reg.vertices, np.float32),
+                                        np.asarray(reg.faces, np.int32),
+                                        target_reduction=reduction)
+    tgt = bj.Mesh(v.astype(np.float64), f.astype(np.int64))
+    return tgt, cKDTree(reg.vertices).query(tgt.vertices)[1]
+
+
+def _stretch(reg, kind: str):
+    """``--stretched``'s target (module doc): ``reg`` re-proportioned along its longest axis
+    (a standing body's height), the vertex order kept."""
+    v = np.array(reg.vertices, np.float64)
     up = int(np.argmax(np.ptp(v, axis=0)))
     side = [a for a in range(3) if a != up]
     if kind == "taller":
@@ -135,37 +146,7 @@ def _stretch(vertices: np.ndarray, kind: str) -> np.ndarray:
     else:  # "longer torso": the band between the two quantiles stretched, the rest moved
         lo, hi = np.quantile(v[:, up], (0.45, 0.80))
         v[:, up] += 0.3 * np.clip(v[:, up] - lo, 0.0, hi - lo)
-    return v
-
-
-def stretched(data: Path, seg: Path, out: Path, cache) -> int:
-    """``--stretched``: the six FAUST pairs with re-proportioned targets (see the module doc)."""
-    template, _ = load_segmentation(seg)
-    names = sorted({n for pair in PAIRS["faust"] for n in pair})
-    meshes = {n: bj.load_mesh(data / "faust" / f"tr_reg_{n}.off") for n in names}
-    spectra = {n: bj.spectrum(m, K_SPECTRA, cache_dir=cache) for n, m in meshes.items()}
-    md, rows = [], []
-    for kind in ("taller", "wider", "longer torso"):
-        part = []
-        for a, b in PAIRS["faust"]:
-            src = meshes[a]
-            tgt = bj.Mesh(_stretch(meshes[b].vertices, kind), meshes[b].faces)
-            sn = bj.spectrum(tgt, K_SPECTRA, cache_dir=cache)  # (keyed by the vertices)
-            gt = np.arange(tgt.n_vertices)  # (the registrations share the vertex order)
-            part += segmentation_pair(spectra[a], sn, (src, tgt), template, template, gt,
-                                      methods=("p2p", "refined"),
-                                      names=(f"tr_reg_{a}", f"tr_reg_{b}"))
-            print(f"{a} -> {b} {kind}: " + ", ".join(
-                f"{r['map']} {r['method']} {r['accuracy']:.2f}" for r in part[-6:]),
-                file=sys.stderr)
-        for r in part:
-            r["deformation"] = kind
-        rows += part
-        md += [f"# Targets {kind}", "", report(part, (30,)).markdown, ""]
-    write_csv(rows, out / "segmentation_stretched.csv")
-    (out / "segmentation_stretched.md").write_text("\n".join(md))
-    print("\n".join(md))
-    return 0
+    return bj.Mesh(v, reg.faces), np.arange(reg.n_vertices)
 
 
 def no_landmarks_report(rows, data: Path, out: Path, args, tail: str = "") -> int:
@@ -271,9 +252,11 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.decimated:
-        return decimated(data, seg, out, args.cache)
+        return changed_targets(data, seg, out, args.cache, REDUCTIONS, _decimate, "reduction",
+                               "segmentation_decimated")
     if args.stretched:
-        return stretched(data, seg, out, args.cache)
+        return changed_targets(data, seg, out, args.cache, ("taller", "wider", "longer torso"),
+                               _stretch, "deformation", "segmentation_stretched")
     rows = []
     for name, pairs in (HELD_OUT if args.held_out else PAIRS).items():
         ds = load_dataset(data / name)
