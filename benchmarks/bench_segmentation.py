@@ -24,7 +24,7 @@ which is also its ground-truth match on the source (the registrations share the 
 order). Writes ``segmentation_decimated.csv`` and ``segmentation_decimated.md``.
 
 ``--stretched``: shapes that are not in ``../shared/data``: the six FAUST pairs with the
-target's body proportions changed by a smooth non-isometric deformation along its longest
+target's body proportions changed by a non-isometric deformation along its longest
 axis (the standing body's height): taller (heights × 1.15), wider (the two other axes × 1.2),
 and a longer torso (heights between the 45 % and 80 % height quantiles, roughly the hips and
 the shoulders, × 1.3, the rest moved rigidly). The vertex order is kept, so the truth is the
@@ -143,9 +143,11 @@ def _stretch(reg, kind: str):
         v[:, up] = v[:, up].mean() + 1.15 * (v[:, up] - v[:, up].mean())
     elif kind == "wider":
         v[:, side] = v[:, side].mean(axis=0) + 1.2 * (v[:, side] - v[:, side].mean(axis=0))
-    else:  # "longer torso": the band between the two quantiles stretched, the rest moved
+    elif kind == "longer torso":  # the band between the two quantiles stretched, the rest moved
         lo, hi = np.quantile(v[:, up], (0.45, 0.80))
         v[:, up] += 0.3 * np.clip(v[:, up] - lo, 0.0, hi - lo)
+    else:
+        raise ValueError(f"unknown deformation {kind!r}")
     return bj.Mesh(v, reg.faces), np.arange(reg.n_vertices)
 
 
