@@ -14,6 +14,7 @@ owns each step, see ``docs/architecture.md``)::
     coding      OMP, ErrorOMP, LeastSquares, Lasso, encode, decode            _coding, ...
     transfer    METHODS, BSF, ..., Pair, transfer, transfer_pairs             _methods, _transfer
     maps        wks, hks, estimate_fmap, zoomout, fmap_to_p2p, estimate_map   _fmap, _estimation, ...
+                orientation_bases (the orientation term's face scan, shared)   _orientation
                 map_distortion, orientation_agreement, choose_map             _distortion
                 mirror_symmetry                                               _highlevel
     mesh level  transfer_values, transfer_labels                              _highlevel
@@ -70,6 +71,7 @@ from ._descriptors import hks, wks
 from ._fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
 from ._refine import refine_point_maps
 from ._estimation import FmapWeights, estimate_fmap, fmap_energy
+from ._orientation import OrientationBasis, orientation_bases
 from ._distortion import choose_map, map_distortion, orientation_agreement
 
 # mesh-level entry points
@@ -110,7 +112,8 @@ __all__ = [
     # functional maps
     "hks", "wks", "fmap_from_p2p", "fmap_to_p2p", "icp_refine", "nearest_neighbors", "zoomout",
     "refine_point_maps",
-    "FmapWeights", "estimate_fmap", "fmap_energy", "map_distortion", "orientation_agreement",
+    "FmapWeights", "estimate_fmap", "fmap_energy", "OrientationBasis", "orientation_bases",
+    "map_distortion", "orientation_agreement",
     "choose_map",
     # mesh level
     "MapEstimate", "estimate_map", "mirror_symmetry", "LabelTransfer", "transfer_values", "transfer_labels",

@@ -49,7 +49,7 @@ import numpy as np
 from ._buckets import BUCKET_FACTORS, merge_buckets, size_bucket
 from ._collection_stages import _Config, _dispatch, _stages_for
 from ._errors import BSFError
-from ._estimation import _geometry
+from ._orientation import _geometry
 from ._fmap import _default_chunk
 from ._highlevel import LANDMARK_FREE_STARTS, WKS_VARIANCE, ZOOMOUT_SAMPLES, _check_landmarks, \
     _check_starts, _regime, estimate_map, mirror_symmetry

@@ -19,8 +19,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._descriptors import _wks_jit
-from ._estimation import FmapWeights, _cast, _energy, _Geometry, _setup, _Shape, _shape_ops, \
-    _solve, _weights_array
+from ._estimation import FmapWeights, _cast, _energy, _setup, _Shape, _shape_ops, _solve, \
+    _weights_array
+from ._orientation import _Geometry
 from ._fmap import _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
 from ._highlevel import ORIENT_WEIGHT, WKS_VARIANCE, ZOOMOUT_STEP
 from ._methods import Pair, SpectralProjection

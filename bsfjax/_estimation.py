@@ -15,8 +15,9 @@ with ``F = Φᵀ A d`` the spectral coefficients of the descriptors and
 bounded resolvent mask of Ren et al. 2019 with exponent ``gamma``, with the same null space.
 The orientation term (Ren et al. 2018, as in pyFM; needs the meshes) uses
 ``O^q = Φᵀ W_q Φ`` with ``(W_q g)(i) = Σ_{faces t ∋ i} (|t|/3) ⟨n_t × ∇d_q, ∇g⟩_t`` (per-face
-gradients of piecewise-linear functions), the reduced form of g ↦ ⟨n × ∇d_q, ∇g⟩; σ = +1 keeps
-the orientation, σ = −1 (``orientation="reversing"``) reverses it.
+gradients of piecewise-linear functions), the reduced form of g ↦ ⟨n × ∇d_q, ∇g⟩
+(``_orientation.py``); σ = +1 keeps the orientation, σ = −1 (``orientation="reversing"``)
+reverses it.
 
 The first column of C (the image of the constant function) is fixed analytically, as in pyFM:
 ``C[:, 0] = (s √(S_N / S_M), 0, …, 0)`` with ``S`` the areas and ``s`` the sign product of the
@@ -52,7 +53,8 @@ call; a stack of pairs (stacked spectra and descriptors of equal shapes) is ``vm
 
 Cost at k = 30, p = 200, n ≈ 7K: the operators D (one GEMM over the k(k+1)/2 eigenvector
 products, ``n k²/2`` memory) dominate with the dense solve of the ``k(k−1)``-unknown system;
-the orientation operators add one scatter pass over the faces and one GEMM ``(p, n) @ (n, k²)``.
+the orientation operators add one scatter pass over the faces (shared by several estimates of
+one pair with ``orientation_bases``) and one GEMM ``(p, n) @ (n, k²)``.
 """
 
 from __future__ import annotations
@@ -69,7 +71,7 @@ import optimistix as optx
 
 from ._validate import check_finite
 from ._errors import BSFError
-from ._mesh import Mesh
+from ._orientation import _cast, _check_bases, _Geometry, _geometries, _orient_ops
 from ._spectrum import Spectrum, map_to_unit_area, unit_area_pair
 
 __all__ = ["estimate_fmap", "FmapWeights", "fmap_energy", "LAPLACIAN_MASKS", "ORIENTATIONS"]
@@ -131,72 +133,6 @@ def _effective_p(F):
     gram = F[1:].T @ F[1:]
     denom = jnp.sum(gram * gram)
     return jnp.where(denom > 0, jnp.trace(gram) ** 2 / jnp.where(denom > 0, denom, 1.0), 1.0)
-
-
-# --------------------------------------------------------------------------- orientation term
-
-
-class _Geometry(NamedTuple):
-    """Per-face data of a mesh for the orientation operators.
-
-    On face t with corners c, the piecewise-linear g has ∇g = Σ_c g_c ∇B_c (∇B_c = n × e_c / 2|t|,
-    e_c the edge opposite c, counter-clockwise), so for any f
-
-        ⟨n × ∇f, ∇g⟩_t = Σ_{c,c'} f_c K_t[c, c'] g_c',    K_t[c, c'] = ⟨n × ∇B_c, ∇B_c'⟩.
-    """
-
-    faces: np.ndarray  # (m, 3) int32
-    K: np.ndarray  # (m, 3, 3)
-    third_area: np.ndarray  # (m,) |t| / 3
-
-
-def _geometry(mesh: Mesh) -> _Geometry:
-    v, f = mesh.vertices, mesh.faces
-    p0, p1, p2 = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-    cross = np.cross(p1 - p0, p2 - p0)
-    dbl = np.linalg.norm(cross, axis=1)
-    safe = np.where(dbl > 0, dbl, 1.0)
-    normals = cross / safe[:, None]
-    opp = np.stack([p2 - p1, p0 - p2, p1 - p0], axis=1)  # counter-clockwise
-    grad_basis = np.cross(normals[:, None, :], opp) / safe[:, None, None]
-    grad_basis[dbl == 0] = 0.0  # degenerate faces carry no gradient
-    rotated = np.cross(normals[:, None, :], grad_basis)
-    K = np.einsum("tcx,tdx->tcd", rotated, grad_basis)
-    return _Geometry(f.astype(np.int32), K, dbl / 6.0)
-
-
-#: Faces per block when assembling orientation operators (memory ``block × k²``).
-_FACE_BLOCK = 2048
-
-
-def _orient_ops(evecs, geom: _Geometry, d):
-    """``(p, k, k)`` reduced orientation operators O^q = Φᵀ W_q Φ (module doc).
-
-    O^q[a, b] = Σ_t (|t|/3) (Σ_c φ_a(t_c)) Σ_{c,c'} d_q(t_c) K_t[c, c'] φ_b(t_c'), which is linear
-    in d: gather Y[v, a, b] = Σ_{corners (t, c) at v} (|t|/3) s_a(t) (K_t φ_b(t))_c once (a scan
-    over face blocks), then O = dᵀ Y is one GEMM ``(p, n) @ (n, k²)``.
-    """
-    n, k = evecs.shape
-    m = geom.faces.shape[0]
-    n_blocks = -(-m // _FACE_BLOCK)
-    pad = n_blocks * _FACE_BLOCK - m
-
-    def blocks(x):  # padded faces have zero area and K = 0: they add nothing
-        x = jnp.pad(x, [(0, pad)] + [(0, 0)] * (x.ndim - 1))
-        return x.reshape(n_blocks, _FACE_BLOCK, *x.shape[1:])
-
-    def one(Y, blk):
-        faces, K, third = blk
-        phi = evecs[faces]  # (T, 3, k)
-        weight = third[:, None] * jnp.sum(phi, axis=1)  # (T, k): (|t|/3) Σ_c φ_a(t_c)
-        for c in range(3):  # the three corners of every face of the block
-            g = sum(K[:, c, e, None] * phi[:, e, :] for e in range(3))  # (T, k): (K_t φ_b)_c
-            Y = Y.at[faces[:, c]].add(weight[:, :, None] * g[:, None, :])
-        return Y, None
-
-    Y, _ = jax.lax.scan(one, jnp.zeros((n, k, k), evecs.dtype),
-                        (blocks(geom.faces), blocks(geom.K), blocks(geom.third_area)))
-    return (d.T @ Y.reshape(n, k * k)).reshape(-1, k, k)
 
 
 # --------------------------------------------------------------------------- energy and solve
@@ -356,12 +292,6 @@ def _solve(pb: _Problem, *, rtol, atol, max_steps):
     return jnp.concatenate([first, free], axis=1)
 
 
-def _cast(shape: _Shape, dt) -> _Shape:
-    """Float arrays in the working dtype (the spectra arrive as float64 numpy), indices int32."""
-    return jax.tree.map(lambda x: jnp.asarray(
-        x, jnp.int32 if np.issubdtype(np.result_type(x), np.integer) else dt), shape)
-
-
 _STATIC = ("lap_kind", "normalize_descriptors", "normalize_weights", "orient_sign")
 
 
@@ -414,26 +344,6 @@ def _weights_array(weights) -> np.ndarray:
     return w
 
 
-def _geometries(mesh, spectrum_shape, name: str):
-    """Per-face geometry of one mesh, or stacked for a sequence of meshes (batched)."""
-    *batch, n, _ = spectrum_shape
-    meshes = [mesh] if not batch else (list(mesh) if isinstance(mesh, (list, tuple)) else [mesh])
-    if batch and len(meshes) != batch[0]:
-        raise BSFError(f"{name} must be a sequence of {batch[0]} meshes for stacked spectra, got "
-                       f"{len(meshes)}")
-    for m in meshes:
-        if not isinstance(m, Mesh):
-            raise BSFError(f"{name} must be a bsfjax.Mesh (or a sequence of them for stacked "
-                           f"spectra), got {type(m).__name__}")
-        if m.n_vertices != n:
-            raise BSFError(f"{name} has {m.n_vertices} vertices but its spectrum has {n}")
-    if len({m.n_faces for m in meshes}) != 1:
-        raise BSFError(f"{name}: stacked meshes must have equal face counts, got "
-                       f"{[m.n_faces for m in meshes]}")
-    geoms = [_geometry(m) for m in meshes]
-    return geoms[0] if not batch else jax.tree.map(lambda *x: np.stack(x), *geoms)
-
-
 def _prepare(source_spectrum, target_spectrum, source_descr, target_descr, k):
     for s, name in ((source_spectrum, "source_spectrum"), (target_spectrum, "target_spectrum")):
         if not isinstance(s, Spectrum):
@@ -475,13 +385,18 @@ def _prepare(source_spectrum, target_spectrum, source_descr, target_descr, k):
     return batched, km, kn, dm, dn
 
 
-def _options(laplacian, gamma, orientation, w, source_mesh, target_mesh, sm_shape, sn_shape):
+def _options(laplacian, gamma, orientation, w, source_mesh, target_mesh, sm_shape, sn_shape,
+             bases=None, ks=None):
+    """The checked options; returns each shape's :class:`_Geometry` (from its mesh), its
+    :class:`OrientationBasis` (``bases``), or ``None`` without the orientation term."""
     if laplacian not in LAPLACIAN_MASKS:
         raise BSFError(f"laplacian must be one of {LAPLACIAN_MASKS}, got {laplacian!r}")
     if not np.isfinite(gamma) or not 0 < gamma <= 1:
         raise BSFError(f"gamma must be in (0, 1], got {gamma!r}")
     if orientation not in ORIENTATIONS:
         raise BSFError(f"orientation must be one of {ORIENTATIONS}, got {orientation!r}")
+    if bases is not None:
+        return _check_bases(bases, source_mesh, target_mesh, w, (sm_shape, sn_shape), ks)
     if w[3] == 0:
         return None, None
     if source_mesh is None or target_mesh is None:
@@ -504,7 +419,8 @@ def estimate_fmap(source_spectrum: Spectrum, target_spectrum: Spectrum, source_d
                   target_descr, *, k=30, weights=None, laplacian: str = "resolvent",
                   gamma: float = 0.5, source_mesh=None, target_mesh=None,
                   orientation: str = "preserving", normalize_descriptors: bool = True,
-                  normalize_weights: bool = True, max_steps: int = 8) -> jax.Array:
+                  normalize_weights: bool = True, max_steps: int = 8,
+                  orientation_bases=None) -> jax.Array:
     """Functional map ``C`` ``(k_N, k_M)`` from source to target minimizing the energy above.
 
     Args:
@@ -528,6 +444,10 @@ def estimate_fmap(source_spectrum: Spectrum, target_spectrum: Spectrum, source_d
         normalize_weights: divide each weight by its term's canonical scale (module doc).
         max_steps: Gauss–Newton step limit (3 are normally used: the problem is linear, the
             first step solves it, the next ones refine and certify convergence).
+        orientation_bases: instead of the meshes, the pair's
+            :func:`bsfjax.orientation_bases` of at least ``k`` eigenvectors: several
+            estimates of one pair (other sizes, descriptors or weights) then share one scan
+            over the faces.  The same map as with the meshes, to round-off.
 
     Returns:
         ``(k_N, k_M)`` map (or ``(B, k_N, k_M)``); :func:`bsfjax.fmap_to_p2p` converts it.
@@ -536,13 +456,24 @@ def estimate_fmap(source_spectrum: Spectrum, target_spectrum: Spectrum, source_d
                                        target_descr, k)
     w = _weights_array(weights)
     gm, gn = _options(laplacian, gamma, orientation, w, source_mesh, target_mesh,
-                      np.shape(source_spectrum.evecs), np.shape(target_spectrum.evecs))
+                      np.shape(source_spectrum.evecs), np.shape(target_spectrum.evecs),
+                      orientation_bases, (km, kn))
     if not isinstance(max_steps, (int, np.integer)) or max_steps < 2:
         raise BSFError(f"max_steps must be an integer >= 2, got {max_steps!r}")
+    return _estimate(source_spectrum, target_spectrum, dm, dn, (km, kn), w, (gm, gn),
+                     laplacian=laplacian, gamma=gamma, orientation=orientation,
+                     normalize_descriptors=normalize_descriptors,
+                     normalize_weights=normalize_weights, max_steps=max_steps, batched=batched)
+
+
+def _estimate(source_spectrum, target_spectrum, dm, dn, ks, w, geoms, *, laplacian, gamma,
+              orientation, normalize_descriptors, normalize_weights, max_steps, batched):
+    """:func:`estimate_fmap` after its checks; ``geoms``: each shape's :class:`_Geometry`,
+    :class:`OrientationBasis` or ``None``."""
     # the two shapes at one area (bsfjax.unit_area_pair): the Laplacian term compares their
     # eigenvalues, so a target in millimetres is matched as the same shape in metres
     source_spectrum, am, target_spectrum, an = unit_area_pair(source_spectrum, target_spectrum)
-    sm, sn = _shapes(source_spectrum, target_spectrum, km, kn, dm, dn, gm, gn)
+    sm, sn = _shapes(source_spectrum, target_spectrum, *ks, dm, dn, *geoms)
     C = _estimate_jit(sm, sn, w, float(gamma), lap_kind=laplacian,
                       normalize_descriptors=bool(normalize_descriptors),
                       normalize_weights=bool(normalize_weights),

@@ -7,6 +7,7 @@ on its own (:func:`bsfjax.build_frame`, :func:`bsfjax.estimate_fmap`, …).
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax.numpy as jnp
@@ -21,6 +22,7 @@ from ._descriptors import wks
 from ._distortion import _distortions, choose_map, map_distortion, orientation_agreement
 from ._errors import BSFError
 from ._estimation import FmapWeights, estimate_fmap
+from ._orientation import orientation_bases
 from ._geodesics import geodesic_distances
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._indicators import labels_to_indicators
@@ -209,13 +211,18 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
             dn.append(wks(target, n_energies, landmarks=pairs[1], k=k0, variance=variance))
         extra = {}
         if meshes and (pairs is None if orient is None else orient):
-            extra = dict(weights=FmapWeights(orient=ORIENT_WEIGHT), source_mesh=source_mesh,
-                         target_mesh=target_mesh)
+            extra = dict(weights=FmapWeights(orient=ORIENT_WEIGHT), orientation_bases=bases())
         C0 = estimate_fmap(source, target, jnp.concatenate(dm, axis=1),
                            jnp.concatenate(dn, axis=1), k=k0, **extra)
         C_ref = zoomout(C0, source, target, refine_to, step=zoomout_step, samples=samples) \
             if refine_to > k0 else C0
         return C0, np.asarray(fmap_to_p2p(C_ref, source, target))
+
+    @functools.cache
+    def bases():
+        """The pair's orientation bases, one face scan for every start that uses them."""
+        k_max = max(k0 for k0, _ in starts + ((k, WKS_VARIANCE),))
+        return orientation_bases(source, target, source_mesh, target_mesh, k_max)
 
     def refined(p2p):
         """A second estimate, with ``derived_landmarks`` landmarks read off ``p2p``."""

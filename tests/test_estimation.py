@@ -176,7 +176,7 @@ def test_orientation_term_matches_dense_least_squares(orientation):
 def test_orientation_operator(small):
     """O^f = Φᵀ W_f Φ; ⟨n × ∇f, ∇f⟩ = 0 on every face, so O^f kills f's own coefficients."""
     (m0, _, _), (s0, _, _), _ = small
-    from bsfjax._estimation import _geometry, _orient_ops
+    from bsfjax._orientation import _geometry, _orient_ops
 
     coef = np.random.default_rng(0).standard_normal((30, 2))
     f, g = (s0.evecs @ coef).T  # band-limited: exactly represented by their coefficients
@@ -311,3 +311,47 @@ def test_bad_input_raises(small):
                       source_mesh=bsfjax.Mesh(*icosphere(1)))
     with pytest.raises(BSFError, match="orientation"):
         estimate_fmap(s0, s2, d0, d2, orientation="flip")
+
+
+@pytest.mark.parametrize("x64", [False, True])
+def test_shared_orientation_bases_equal_the_meshes(small, x64):
+    """One face scan at k = 24 serves the estimates at 10 and 24 (top-left blocks), with the
+    same maps as the meshes give, also for a target in other units (both put at one area)."""
+    (m0, _, m2), (s0, _, _), _ = small
+    big = bsfjax.Mesh(7.0 * m2.vertices, m2.faces)
+    s2 = bsfjax.spectrum(big, 30)
+    d0, d2 = descriptors(s0, [5]), descriptors(s2, [5])
+    w = FmapWeights(orient=1.0)
+    with jax.enable_x64(x64):
+        bases = bsfjax.orientation_bases(s0, s2, m0, big, 24)
+        assert bases[0].Y.shape == (642, 24, 24)
+        for k in (10, 24):
+            C = np.asarray(estimate_fmap(s0, s2, d0, d2, k=k, weights=w, source_mesh=m0,
+                                         target_mesh=big))
+            C_shared = np.asarray(estimate_fmap(s0, s2, d0, d2, k=k, weights=w,
+                                                orientation_bases=bases))
+            tol = 1e-10 if x64 else 1e-5
+            np.testing.assert_allclose(C_shared, C, atol=tol * np.abs(C).max())
+        C_plain = np.asarray(estimate_fmap(s0, s2, d0, d2, k=10))
+    assert np.abs(C_plain - np.asarray(estimate_fmap(
+        s0, s2, d0, d2, k=10, weights=w, orientation_bases=bases))).max() > 1e-3
+
+
+def test_orientation_bases_bad_input(small):
+    (m0, _, m2), (s0, _, s2), _ = small
+    d0, d2 = descriptors(s0, [1]), descriptors(s2, [1])
+    bases = bsfjax.orientation_bases(s0, s2, m0, m2, 8)
+    w = FmapWeights(orient=1.0)
+    with pytest.raises(BSFError, match="at least 10 eigenvectors"):
+        estimate_fmap(s0, s2, d0, d2, k=10, weights=w, orientation_bases=bases)
+    with pytest.raises(BSFError, match="not both"):
+        estimate_fmap(s0, s2, d0, d2, k=8, weights=w, orientation_bases=bases, source_mesh=m0,
+                      target_mesh=m2)
+    with pytest.raises(BSFError, match="weights.orient must be > 0"):
+        estimate_fmap(s0, s2, d0, d2, k=8, orientation_bases=bases)
+    with pytest.raises(BSFError, match="orientation_bases must be the pair's"):
+        estimate_fmap(s0, s2, d0, d2, k=8, weights=w, orientation_bases=(m0, m2))
+    with pytest.raises(BSFError, match="k must be in"):
+        bsfjax.orientation_bases(s0, s2, m0, m2, 31)
+    with pytest.raises(BSFError, match="has 42 vertices but its spectrum has 642"):
+        bsfjax.orientation_bases(s0, s2, m0, bsfjax.Mesh(*icosphere(1)), 8)
