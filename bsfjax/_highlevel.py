@@ -19,7 +19,8 @@ from ._methods import (AbstractMethod, BSF, GeodesicBalls, PullBack, RefinedPull
                        SpectralProjection, as_method, method_name)
 from ._transfer import Pair, transfer
 from ._descriptors import wks
-from ._distortion import _distortions, choose_map, map_distortion, orientation_agreement
+from ._distortion import (ORIENTATION_SLACK, _distortions, choose_map, map_distortion,
+                          orientation_agreement)
 from ._errors import BSFError
 from ._estimation import FmapWeights, estimate_fmap
 from ._orientation import orientation_bases
@@ -233,10 +234,14 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     quality = {}
     if len(runs) > 1:
         maps = np.stack([p for _, p in runs])
-        dist = map_distortion(source_mesh, target_mesh, maps)
         orient = orientation_agreement(source_mesh, target_mesh, maps)
-        best = choose_map(dist, orient)
-        quality = dict(start=starts[best], distortion=float(dist[best]),
+        # choose_map picks among the maps within its slack of the best orientation: only
+        # their distortions are needed (fewer Dijkstra sources, the same choice)
+        near = np.flatnonzero(orient >= orient.max() - ORIENTATION_SLACK)
+        dist = map_distortion(source_mesh, target_mesh, maps[near])
+        pick = choose_map(dist, orient[near])
+        best = int(near[pick])
+        quality = dict(start=starts[best], distortion=float(dist[pick]),
                        orientation=float(orient[best]))
         runs = [runs[best]]
         if derived_landmarks:  # a second estimate, with landmarks read off the kept map
