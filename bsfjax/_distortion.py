@@ -102,16 +102,18 @@ def map_distortion(source_mesh: Mesh, target_mesh: Mesh, p2p, *,
 
 
 def _distortions(source_mesh: Mesh, target_mesh: Mesh, maps: np.ndarray, n_samples: int,
-                 radius: float | None) -> np.ndarray | None:
+                 radius: float | None, geodesics=None) -> np.ndarray | None:
     """:func:`map_distortion` of checked ``(B, n_N)`` maps; ``None`` where a ``radius`` keeps
     no pair of samples (a coarse target: :func:`bsfjax.estimate_map` then skips its turn
-    check)."""
+    check).  ``geodesics``: the pair's :class:`_Geodesics` ``(source, target)`` when several
+    calls on one pair share their Dijkstra runs."""
+    geo_m, geo_n = geodesics or (_Geodesics(source_mesh), _Geodesics(target_mesh))
     s = np.asarray(farthest_point_sampling(target_mesh, min(n_samples, target_mesh.n_vertices)))
-    d_n = _capped(geodesic_distances(target_mesh, s)[:, s]) / np.sqrt(target_mesh.area)
+    d_n = _capped(geo_n.among(s)) / np.sqrt(target_mesh.area)
     images = maps[:, s]  # (B, s)
     uniq, inv = np.unique(images, return_inverse=True)
     inv = inv.reshape(images.shape)
-    d_u = _capped(geodesic_distances(source_mesh, uniq)[:, uniq]) / np.sqrt(source_mesh.area)
+    d_u = _capped(geo_m.among(uniq)) / np.sqrt(source_mesh.area)
     d_m = d_u[inv[:, :, None], inv[:, None, :]]  # (B, s, s)
     if radius is None:
         pairs = ~np.eye(len(s), dtype=bool)
@@ -120,6 +122,35 @@ def _distortions(source_mesh: Mesh, target_mesh: Mesh, maps: np.ndarray, n_sampl
     if not pairs.any():
         return None
     return (np.abs(d_m - d_n)[:, pairs] / d_n[pairs]).mean(axis=1)
+
+
+class _Geodesics:
+    """Dijkstra distances among the vertices of one mesh asked for so far.  A later call runs
+    Dijkstra only from the vertices not seen before: their rows also hold their distances to
+    the others (the edge graph is undirected).  Memory: the square of the vertices seen, never
+    ``n × n``.  :func:`bsfjax.estimate_map` shares one per shape across its distortions."""
+
+    def __init__(self, mesh: Mesh):
+        self.mesh = mesh
+        self.seen = np.zeros(0, np.int64)  # vertices, in the order first asked for
+        self.d = np.zeros((0, 0))
+
+    def among(self, vertices) -> np.ndarray:
+        """``(len(vertices), len(vertices))`` distances between the given vertices."""
+        v = np.asarray(vertices, np.int64)
+        new = np.setdiff1d(v, self.seen)
+        if new.size:
+            rows = geodesic_distances(self.mesh, new)  # (new, n)
+            old = len(self.seen)
+            both = np.concatenate([self.seen, new])
+            d = np.empty((len(both), len(both)))
+            d[:old, :old] = self.d
+            d[old:] = rows[:, both]
+            d[:old, old:] = rows[:, self.seen].T
+            self.seen, self.d = both, d
+        order = np.argsort(self.seen, kind="stable")
+        pos = order[np.searchsorted(self.seen, v, sorter=order)]
+        return self.d[np.ix_(pos, pos)]
 
 
 def _capped(d: np.ndarray) -> np.ndarray:

@@ -19,8 +19,8 @@ from ._methods import (AbstractMethod, BSF, GeodesicBalls, PullBack, RefinedPull
                        SpectralProjection, as_method, method_name)
 from ._transfer import Pair, transfer
 from ._descriptors import wks
-from ._distortion import (ORIENTATION_SLACK, _distortions, choose_map, map_distortion,
-                          orientation_agreement)
+from ._distortion import (DISTORTION_SAMPLES, ORIENTATION_SLACK, _distortions, _Geodesics,
+                          choose_map, orientation_agreement)
 from ._errors import BSFError
 from ._estimation import FmapWeights, estimate_fmap
 from ._orientation import orientation_bases
@@ -234,11 +234,19 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     quality = {}
     if len(runs) > 1:
         maps = np.stack([p for _, p in runs])
+        # the distortions below share their Dijkstra runs (each source vertex run once)
+        geodesics = (_Geodesics(source_mesh), _Geodesics(target_mesh))
+
+        def distortion(candidates, n_samples=DISTORTION_SAMPLES, radius=None):
+            return _distortions(source_mesh, target_mesh,
+                                np.atleast_2d(candidates).astype(np.int64), n_samples, radius,
+                                geodesics)
+
         orient = orientation_agreement(source_mesh, target_mesh, maps)
         # choose_map picks among the maps within its slack of the best orientation: only
         # their distortions are needed (fewer Dijkstra sources, the same choice)
         near = np.flatnonzero(orient >= orient.max() - ORIENTATION_SLACK)
-        dist = map_distortion(source_mesh, target_mesh, maps[near])
+        dist = distortion(maps[near])
         pick = choose_map(dist, orient[near])
         best = int(near[pick])
         quality = dict(start=starts[best], distortion=float(dist[pick]),
@@ -246,7 +254,7 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
         runs = [runs[best]]
         if derived_landmarks:  # a second estimate, with landmarks read off the kept map
             derived, second = refined(runs[0][1])
-            d2 = map_distortion(source_mesh, target_mesh, second[1])
+            d2 = float(distortion(second[1])[0])
             o2 = orientation_agreement(source_mesh, target_mesh, second[1])
             if choose_map([quality["distortion"], d2], [quality["orientation"], o2]) == 1:
                 runs = [second]
@@ -260,15 +268,14 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
             if derived_landmarks:
                 alt_landmarks, alt = refined(alt[1])
             both = np.stack([runs[0][1], alt[1]]).astype(np.int64)
-            local = _distortions(source_mesh, target_mesh, both, TURN_SAMPLES, TURN_RADIUS)
+            local = distortion(both, TURN_SAMPLES, TURN_RADIUS)
             orient = orientation_agreement(source_mesh, target_mesh, both)
             # (a target too coarse for the local distortion keeps the map)
             quality["swapped"] = local is not None and choose_map(local, orient) == 1
             if quality["swapped"]:
                 runs = [alt]
                 quality.update(landmarks=alt_landmarks, orientation=float(orient[1]),
-                               distortion=float(map_distortion(source_mesh, target_mesh,
-                                                               alt[1])))
+                               distortion=float(distortion(alt[1])[0]))
     C0, p2p = runs[0]
     C = np.asarray(fmap_from_p2p(source.truncate(k), target.truncate(k), p2p))
     back = lambda X: np.asarray(map_to_unit_area(np.asarray(X), am, an, inverse=True),  # noqa: E731

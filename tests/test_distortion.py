@@ -161,3 +161,30 @@ def test_bad_inputs_are_named(sphere):
             fn(mesh, np.zeros((3, 3)), np.arange(n))
     with pytest.raises(ValueError, match="n_samples must be an integer >= 2"):
         map_distortion(mesh, mesh, np.arange(n), n_samples=1)
+
+
+def test_shared_geodesics_equal_fresh_dijkstra_and_run_each_vertex_once(sphere, monkeypatch):
+    """_Geodesics (estimate_map's distortions share one per shape) answers overlapping,
+    unordered, repeated vertex sets as Dijkstra from scratch does, running it from each vertex
+    once; and a distortion through it equals map_distortion's."""
+    from bsfjax import _distortion
+
+    mesh, mirror = sphere
+    runs = []
+    real = _distortion.geodesic_distances
+    monkeypatch.setattr(_distortion, "geodesic_distances",
+                        lambda m, src: runs.append(len(src)) or real(m, src))
+    geo = _distortion._Geodesics(mesh)
+    rng = np.random.default_rng(0)
+    first = rng.choice(mesh.n_vertices, 30, replace=False)
+    second = np.concatenate([first[10:], rng.choice(mesh.n_vertices, 25, replace=False),
+                             first[:3]])  # overlaps the first, other order, a repeat
+    for vs in (first, second, first[::-1]):
+        np.testing.assert_allclose(geo.among(vs), real(mesh, vs)[:, vs], rtol=1e-12, atol=0)
+    assert sum(runs) == len(np.union1d(first, second)) == len(geo.seen)
+    p2p = np.stack([mirror, rng.permutation(mesh.n_vertices)])  # an isometry, a scramble
+    shared = _distortion._distortions(mesh, mesh, p2p, 40, None, (geo, _distortion._Geodesics(
+        mesh)))
+    np.testing.assert_allclose(shared, map_distortion(mesh, mesh, p2p, n_samples=40),
+                               rtol=1e-12, atol=1e-15)
+    assert shared[0] < 1e-15 < 0.1 < shared[1]
