@@ -234,7 +234,7 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     quality = {}
     if len(runs) > 1:
         maps = np.stack([p for _, p in runs])
-        # the distortions below share their Dijkstra runs (each source vertex run once)
+        # the distortions below share their Dijkstra runs (each vertex of a shape run once)
         geodesics = (_Geodesics(source_mesh), _Geodesics(target_mesh))
 
         def distortion(candidates, n_samples=DISTORTION_SAMPLES, radius=None):

@@ -14,7 +14,7 @@ faces (memory ``n k²``); each estimate then needs one GEMM ``(p, n) @ (n, k²)`
 ``(a, b)`` of ``Y`` involves ``φ_a`` and ``φ_b`` only, so the ``Y`` of ``k`` eigenvectors
 holds that of every smaller size as its top-left block: :func:`orientation_bases` scans once
 for several estimates of a pair (the 15 starts of :func:`bsfjax.estimate_map` without
-landmarks: 1.16× faster there, docs/benchmarks.md).
+landmarks: their estimates 1.45–1.75× faster, docs/benchmarks.md).
 """
 
 from __future__ import annotations
