@@ -70,7 +70,7 @@ import bsfjax as bj
 from bsfjax._highlevel import LANDMARK_FREE_STARTS, ORIENT_WEIGHT
 from bsfjax.experiments._datasets import load_dataset
 from bsfjax.experiments._io import write_csv
-from bsfjax.experiments.segmentation import (K_SPECTRA, METHODS, load_segmentation, report,
+from bsfjax.experiments.segmentation import (K_SPECTRA, METHODS, report,
                                              segmentation_experiment, segmentation_pair,
                                              shape_labels)
 
@@ -92,7 +92,7 @@ def changed_targets(data: Path, seg: Path, out: Path, cache, variants, change, k
     p2p and ``refined`` through the three maps.  The target's truth is the template's label
     through that map (the registrations share the vertex order).  Writes ``stem.csv`` and
     ``stem.md``, the rows tagged ``key`` = the variant."""
-    template, _ = load_segmentation(seg)
+    template, _ = bj.load_labels(seg)
     names = sorted({n for pair in PAIRS["faust"] for n in pair})
     meshes = {n: bj.load_mesh(data / "faust" / f"tr_reg_{n}.off") for n in names}
     spectra = {n: bj.spectrum(m, K_SPECTRA, cache_dir=cache) for n, m in meshes.items()}
@@ -336,7 +336,7 @@ def main(argv=None) -> int:
         return no_landmarks_report(rows, data, out, args, tail)
     # the default transfer after the map, warm (FAUST 000 -> 010, the CLI's default map)
     ds = load_dataset(data / "faust")
-    template, _ = load_segmentation(seg)
+    template, _ = bj.load_labels(seg)
     src, tgt = ds.shapes[0], ds.shapes[[e.name for e in ds.shapes].index("tr_reg_010")]
     sm, sn = (bj.spectrum(e.mesh, 100, cache_dir=args.cache) for e in (src, tgt))
     lm = bj.farthest_point_sampling(src.mesh, 5)

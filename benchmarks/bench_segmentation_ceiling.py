@@ -37,7 +37,7 @@ import scipy.spatial
 import bsfjax as bj
 from bsfjax.experiments._datasets import load_dataset
 from bsfjax.experiments.segmentation import (N_LANDMARKS, _maps, gt_inverse, label_metrics,
-                                             load_segmentation, shape_labels)
+                                             shape_labels)
 
 FAUST_PAIRS = [("000", "001"), ("010", "012"), ("020", "022"), ("000", "010"), ("001", "021"),
                ("012", "022")]
@@ -137,7 +137,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     data, out = Path(args.data), Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    template, _ = load_segmentation(data / "segmentations" / "smpl_vert_segmentation.json")
+    template, _ = bj.load_labels(data / "segmentations" / "smpl_vert_segmentation.json")
     text = ["Accuracy % against the `.vts` (sampleID) truth / the geometric truth:", "",
             *remeshed(data, template, args.cache), "",
             "Nearest-neighbour point map of the ground-truth functional map, accuracy %:", "",

@@ -7,6 +7,7 @@ The public names, grouped by pipeline stage (data flows downwards only; one priv
 owns each step, see ``docs/architecture.md``)::
 
     mesh        Mesh, load_mesh, save_mesh, mesh_report, example_pair        _mesh, _example
+                load_labels, save_labels (segmentation files, SMPL's .json)   _label_files
     operators   laplacian -> (W, A)                                           _laplacian
     spectrum    Spectrum, spectrum, spectrum_from_operators                   _spectrum
     sampling    farthest_point_sampling, subsample, geodesic_distances        _sampling, _geodesics
@@ -82,6 +83,7 @@ from ._collection import TargetTransfer, size_bucket, transfer_collection
 # metrics and test functions
 from ._metrics import relative_error
 from ._indicators import indicators_to_labels, labels_to_indicators, random_indicators
+from ._label_files import LabelFile, load_labels, save_labels
 
 try:
     __version__ = _version("bsfjax")
@@ -120,4 +122,5 @@ __all__ = [
     "transfer_collection", "TargetTransfer", "size_bucket",
     # metrics
     "relative_error", "indicators_to_labels", "labels_to_indicators", "random_indicators",
+    "LabelFile", "load_labels", "save_labels",
 ]

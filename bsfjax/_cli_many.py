@@ -142,9 +142,10 @@ def cmd_transfer_many(args, error) -> int:
     mesh_dir = Path(args.mesh_out_dir) if args.mesh_out_dir else None
     landmarks = _read_landmarks_file(args.landmarks_file, targets, error)
     source = load_mesh(args.source)
-    from .cli import one_start, read_values
+    from ._cli_io import read_values
+    from .cli import one_start
 
-    values = read_values(args, source.n_vertices)
+    values, _ = read_values(args, source.n_vertices)
     out_dir.mkdir(parents=True, exist_ok=True)
     multi = jax.process_count() > 1
     if jax.process_index() == 0:  # before the first barrier: no process is writing yet
@@ -192,7 +193,7 @@ def cmd_transfer_many(args, error) -> int:
         else:
             result = res.values.T if res.values.shape[0] > 1 else res.values[0]
         if mesh_dir is not None:
-            from .cli import coloured_point_data
+            from ._cli_io import coloured_point_data
 
             save_mesh(mesh_dir / f"{path.stem}.ply", load_mesh(path),
                       point_data=coloured_point_data(result, labels), immediate=True)

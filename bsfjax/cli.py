@@ -11,6 +11,9 @@ import sys
 import warnings
 from pathlib import Path
 
+from ._cli_io import (CLIError, _read_array, _write_array, coloured_point_data, is_json,
+                      read_labels, read_values)
+
 
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
@@ -44,9 +47,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("target", nargs="+", help="target mesh; with --out-dir any number of files, "
                                              "folders (their mesh files) or glob patterns")
     what = p.add_mutually_exclusive_group(required=True)
-    what.add_argument("--labels", help="one integer label per source vertex (.txt or .npy)")
+    what.add_argument("--labels", help="one integer label per source vertex (.txt or .npy), or "
+                      "parts as SMPL's .json {part name: [vertex indices]}")
     what.add_argument("--function", help="per-source-vertex values: (n,) or (n, m) (.txt or .npy)")
-    p.add_argument("--out", help="per-target-vertex labels/values (.txt or .npy), one target")
+    p.add_argument("--out", help="per-target-vertex labels/values (.txt or .npy; labels also .json "
+                                 "{part name: [vertex indices]}), one target")
     p.add_argument("--out-dir", help="many targets: write DIR/<target name>.txt and "
                                      "DIR/summary.json; complete outputs are skipped on a rerun")
     p.add_argument("--map", nargs="+", default=["estimate"], metavar="KIND [FILE]",
@@ -70,8 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threshold", type=float, default=None,
                    help="labels: a target vertex whose best score is below this is unassigned (-1) "
                         "(default 0.5; 0 for 'refined', whose scores are vote shares)")
-    p.add_argument("--truth", help="labels: ground-truth label per target vertex (.txt or .npy); "
-                                   "report the share of the target's area labelled correctly")
+    p.add_argument("--truth", help="labels: ground-truth label per target vertex (.txt, .npy or "
+                                   ".json as --labels); report the share of the target's area "
+                                   "labelled correctly")
     p.add_argument("--truth-dir", help="--out-dir: folder of <target name>.txt/.npy ground "
                                        "truths; summary.json reports each accuracy")
     p.add_argument("--overwrite", action="store_true", help="--out-dir: recompute complete outputs")
@@ -126,52 +132,6 @@ def build_parser() -> argparse.ArgumentParser:
 CLI_EXCLUDED = ("std2",)
 
 
-class CLIError(ValueError):
-    """Bad command-line input (reported as one line)."""
-
-
-def _read_array(path: str, what: str, dtype=None):
-    import numpy as np
-
-    p = Path(path)
-    if not p.exists():
-        raise CLIError(f"{what} file {p}: no such file")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # loadtxt on an empty file
-            arr = np.load(p, allow_pickle=False) if p.suffix == ".npy" else np.loadtxt(p, ndmin=1)
-    except Exception as exc:
-        raise CLIError(f"{what} file {p}: cannot read ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from exc
-    if arr.size == 0:
-        raise CLIError(f"{what} file {p}: no data")
-    if not np.issubdtype(arr.dtype, np.number):
-        raise CLIError(f"{what} file {p}: expected numbers, got dtype {arr.dtype}")
-    if dtype is int and not np.issubdtype(arr.dtype, np.integer):
-        bad = ~np.isfinite(arr) | (np.mod(arr, 1) != 0) | (np.abs(arr) >= 2.0**63)
-        if bad.any():  # the value as read, not as a wrapped-around int64
-            i = int(np.argmax(bad.reshape(-1)))
-            raise CLIError(f"{what} file {p}: expected integers, found {arr.reshape(-1)[i].item()!r} "
-                           f"(entry {i})")
-        arr = arr.astype(np.int64)
-    return arr
-
-
-def _write_array(path: str, arr) -> None:
-    import numpy as np
-
-    from ._files import atomic_path
-
-    p = Path(path)
-    if p.suffix not in (".npy", ".txt"):
-        raise CLIError(f"--out {p}: use a .txt or .npy file name")
-    with atomic_path(p) as tmp:
-        if p.suffix == ".npy":
-            with open(tmp, "wb") as fh:
-                np.save(fh, arr)
-        else:
-            np.savetxt(tmp, arr, fmt="%d" if np.issubdtype(arr.dtype, np.integer) else "%.8g")
-
-
 def one_start(args, k: int):
     """``estimate_map``'s ``starts`` for ``--one-start`` (``None``: its default)."""
     from ._highlevel import WKS_VARIANCE
@@ -192,44 +152,6 @@ def _parse_landmarks(text: str | None):
         raise CLIError(f"--landmarks: {len(src)} source and {len(tgt)} target indices; the two "
                        "lists must have the same, non-zero length")
     return src, tgt
-
-
-def read_values(args, n_source: int):
-    """The ``--labels`` (int, ``(n,)``) or ``--function`` (``(m, n)``) of a transfer, checked."""
-    if args.labels:
-        values = _read_array(args.labels, "labels", dtype=int)
-        if values.ndim != 1:
-            raise CLIError(f"labels file {args.labels}: expected one label per line")
-        if values.min() < 0:
-            raise CLIError(f"labels file {args.labels}: labels must be >= 0, got {values.min()}")
-    else:
-        values = _read_array(args.function, "function")
-        values = values.T if values.ndim == 2 else values
-    if values.shape[-1] != n_source:
-        raise CLIError(f"{'labels' if args.labels else 'function'} file has {values.shape[-1]} "
-                       f"entries per function but the source mesh has {n_source} vertices")
-    return values
-
-
-def coloured_point_data(result, labels: bool) -> dict:
-    """PLY vertex properties of a transfer: the result and its colours."""
-    import numpy as np
-
-    if labels:
-        from .plot import _label_colour  # the segmentation palette of the figures
-
-        rgb = _label_colour(result)
-        data = {"label": result}
-    else:
-        from matplotlib import colormaps
-
-        v = result if result.ndim == 1 else result[:, 0]
-        lo, hi = float(np.min(v)), float(np.max(v))
-        rgb = colormaps["viridis"]((v - lo) / (hi - lo if hi > lo else 1.0))[:, :3]
-        data = {"value": v}
-    rgb8 = np.clip(np.round(255 * rgb), 0, 255).astype(np.uint8)
-    data.update(red=rgb8[:, 0], green=rgb8[:, 1], blue=rgb8[:, 2])
-    return data
 
 
 #: Options of the multi-target form only, and of the one-target form only.
@@ -268,8 +190,8 @@ def _transfer_one(args) -> int:
     from ._mesh import load_mesh, save_mesh
     from ._spectrum import spectrum
 
-    if Path(args.out).suffix not in (".npy", ".txt"):
-        raise CLIError(f"--out {args.out}: use a .txt or .npy file name")
+    if Path(args.out).suffix not in (".npy", ".txt") and not (args.labels and is_json(args.out)):
+        raise CLIError(f"--out {args.out}: use a .txt or .npy file name (labels: also .json)")
     if args.truth and not args.labels:
         raise CLIError("--truth compares labels: use it with --labels")
     if args.mesh_out and Path(args.mesh_out).suffix.lower() != ".ply":
@@ -284,10 +206,10 @@ def _transfer_one(args) -> int:
 
         check_indices(landmarks[0], "--landmarks (source)", source.n_vertices)
         check_indices(landmarks[1], "--landmarks (target)", target.n_vertices)
-    values = read_values(args, source.n_vertices)
+    values, names = read_values(args, source.n_vertices)
     truth = None
     if args.truth:
-        truth = _read_array(args.truth, "truth", dtype=int)
+        truth, _ = read_labels(args.truth, "truth")
         if truth.shape != (target.n_vertices,):
             raise CLIError(f"truth file {args.truth}: expected one label per target vertex "
                            f"({target.n_vertices}), got shape {truth.shape}")
@@ -373,14 +295,12 @@ def _transfer_one(args) -> int:
         result = result.T if result.ndim == 2 else result
     if args.mesh_out:
         save_mesh(args.mesh_out, target, point_data=coloured_point_data(result, bool(args.labels)))
-    _write_array(args.out, result)
+    _write_array(args.out, result, names)
     print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else ""), file=sys.stderr)
     return 0
 
 
 def _cmd_example(args) -> int:
-    import numpy as np
-
     from ._files import write_text_atomic
     from ._demo import example_landmarks
     from ._example import example_pair

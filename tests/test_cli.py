@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -97,6 +98,28 @@ def test_transfer_command_labels_with_point_map(cli_files):
     assert m.points.shape[0] == pair.target.n_vertices
     assert {"red", "green", "blue", "label"} <= set(m.point_data)
     np.testing.assert_array_equal(m.point_data["label"], got)
+
+
+def test_transfer_command_smpl_json_labels_in_and_out(cli_files, tmp_path):
+    """Labels as SMPL's {part: [vertices]} .json: read, pulled back through the given map, and
+    written as .json with the source's part names; a .json truth is scored by those names."""
+    d, pair = cli_files
+    names = [f"part {n}" for n in pair.label_names]
+    parts = {names[i]: np.flatnonzero(pair.labels == i).tolist() for i in range(len(names))}
+    (tmp_path / "parts.json").write_text(json.dumps(parts))
+    p2p = np.asarray(pair.p2p)
+    truth = {n: np.flatnonzero(pair.labels[p2p] == i).tolist() for i, n in enumerate(names)}
+    (tmp_path / "truth.json").write_text(json.dumps(truth))
+    out = tmp_path / "target_parts.json"
+    rc = main(["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--labels",
+               str(tmp_path / "parts.json"), "--map", "p2p", str(d / "identity.npy"), "-k", "20",
+               "--truth", str(tmp_path / "truth.json"), "--out", str(out)])
+    assert rc == 0
+    got = json.loads(out.read_text())
+    assert got == truth  # the exact map's pull-back, part by part, under the source's names
+    assert main(["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--function",
+                 str(d / "labels.txt"), "--map", "p2p", str(d / "identity.npy"), "-k", "20",
+                 "--out", str(tmp_path / "f.json")]) == 2  # a function is not written as .json
 
 
 def test_transfer_command_function_with_estimated_map(cli_files):

@@ -1,36 +1,16 @@
 """``reproduce segmentation`` (``bsfjax/experiments/segmentation.py``): labels, metrics, run."""
 
-import json
-
 import numpy as np
 import pytest
 
 import bsfjax as bj
 from bsfjax.experiments import reproduce
 from bsfjax.experiments._datasets import load_dataset
-from bsfjax.experiments.segmentation import (K_SPECTRA, label_metrics, load_segmentation,
+from bsfjax.experiments.segmentation import (K_SPECTRA, label_metrics,
                                              report, segmentation_experiment,
                                              segmentation_pair, shape_labels)
 
 from .conftest import DATA, data_path
-
-
-def test_load_segmentation_json_first_name_wins(tmp_path):
-    f = tmp_path / "parts.json"
-    f.write_text(json.dumps({"b": [0, 1, 2], "a": [2, 3], "c": [4]}))
-    lab, names = load_segmentation(f)
-    assert names == ("a", "b", "c")
-    np.testing.assert_array_equal(lab, [1, 1, 0, 0, 2])  # vertex 2 in a and b: "a"
-    f.write_text(json.dumps({"a": [0, 2]}))
-    with pytest.raises(bj.BSFError, match="1 vertices are in no part"):
-        load_segmentation(f)
-    g = tmp_path / "labels.txt"
-    np.savetxt(g, [0, 2, 1])
-    lab, names = load_segmentation(g)
-    np.testing.assert_array_equal(lab, [0, 2, 1])
-    assert names == ("0", "1", "2")
-    with pytest.raises(bj.BSFError, match="no such file"):
-        load_segmentation(tmp_path / "missing.json")
 
 
 def test_label_metrics_closed_form():
@@ -91,7 +71,7 @@ def test_one_pair_is_a_row_of_the_experiment(tmp_path):
     kw = dict(methods=("p2p", "refined"), maps=("default", "truth"))
     rows = segmentation_experiment(ds, segmentation=seg, pair_list=[(i, j)], k=20,
                                    progress=False, keep_labels=0, **kw)
-    template, _ = load_segmentation(seg)
+    template, _ = bj.load_labels(seg)
     src, tgt = ds.shapes[i], ds.shapes[j]
     sm, sn = (bj.spectrum(e.mesh, min(K_SPECTRA, e.n_vertices - 1)) for e in (src, tgt))
     alone = segmentation_pair(sm, sn, (src.mesh, tgt.mesh), shape_labels(ds, i, template),
@@ -124,7 +104,7 @@ def test_remeshed_labels_follow_the_template():
     """FAUST_5k: a vertex named by the ``.vts`` list has its template vertex's label."""
     ds = load_dataset(data_path("faust_5k"))
     seg = data_path("segmentations", "smpl_vert_segmentation.json")
-    template, _ = load_segmentation(seg)
+    template, _ = bj.load_labels(seg)
     lab = shape_labels(ds, 0, template)
     e = ds.shapes[0]
     sid = np.loadtxt(data_path("faust_5k", "corres", "sampleID.vts"), dtype=int) - 1

@@ -222,11 +222,10 @@ def test_turn_check_unturns_a_faust_pair():
     turned front to back (about a third of the SMPL parts right: the torso bands); the turn
     check swaps it for the right one.  The source's mirror symmetry it uses maps each SMPL
     part to its mirror part."""
-    from bsfjax.experiments.segmentation import load_segmentation
     seg = data_path("segmentations", "smpl_vert_segmentation.json")
     src = bsfjax.load_mesh(data_path("faust", "tr_reg_001.off"))
     tgt = bsfjax.load_mesh(data_path("faust", "tr_reg_010.off"))
-    labels, names = load_segmentation(seg)
+    labels, names = bsfjax.load_labels(seg)
     sm, sn = bsfjax.spectrum(src, 60), bsfjax.spectrum(tgt, 60)
     mirror = {n: n.replace("left", "RIGHT").replace("right", "left").replace("RIGHT", "right")
               for n in names}

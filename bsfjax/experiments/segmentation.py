@@ -25,7 +25,6 @@ includes compilation).
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -36,6 +35,7 @@ from tqdm.auto import tqdm
 from .._errors import BSFError
 from .._fmap import fmap_from_p2p
 from .._highlevel import WKS_VARIANCE, ZOOMOUT_SAMPLES, estimate_map, transfer_labels
+from .._label_files import load_labels
 from .._mesh import mesh_edges
 from .._refine import REFINE_EIGENPAIRS
 from .._sampling import farthest_point_sampling, subsample
@@ -43,7 +43,7 @@ from .._spectrum import spectrum
 from ._datasets import Dataset
 from ._io import Report, pivot_markdown
 
-__all__ = ["segmentation_experiment", "segmentation_pair", "load_segmentation", "shape_labels",
+__all__ = ["segmentation_experiment", "segmentation_pair", "shape_labels",
            "label_metrics", "MAPS", "DEFAULT_MAPS", "METHODS"]
 
 DEFAULT_KS = (30,)
@@ -67,45 +67,6 @@ BAND = 0.02
 N_LANDMARKS = 5
 #: Eigenpairs of the spectra (the ``"refined"`` method continues the map to this size).
 K_SPECTRA = REFINE_EIGENPAIRS
-
-
-def load_segmentation(path) -> tuple[np.ndarray, tuple[str, ...]]:
-    """``(labels, names)`` of a template segmentation file.
-
-    ``.json``: ``{part name: [vertex indices]}`` (the SMPL format); a vertex listed in several
-    parts takes the first in sorted name order; every vertex up to the largest index must be
-    listed.  ``.txt`` / ``.npy``: one integer label per template vertex (names ``"0"``, …).
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise BSFError(f"segmentation file {path}: no such file")
-    if path.suffix.lower() == ".json":
-        try:
-            parts = json.loads(path.read_text())
-            names = tuple(sorted(parts))
-            idx = [np.asarray(parts[n], dtype=np.int64).ravel() for n in names]
-        except (ValueError, TypeError, AttributeError) as exc:
-            raise BSFError(f"segmentation file {path}: expected {{part name: [vertex indices]}} "
-                           f"({exc})") from None
-        if not names or any(i.size and i.min() < 0 for i in idx):
-            raise BSFError(f"segmentation file {path}: no parts, or negative vertex indices")
-        lab = np.full(1 + max(int(i.max()) for i in idx if i.size), -1, np.int64)
-        for i in reversed(range(len(names))):  # reversed: the first name wins
-            lab[idx[i]] = i
-        if (lab < 0).any():
-            raise BSFError(f"segmentation file {path}: {int((lab < 0).sum())} vertices are in no "
-                           f"part (first: {int(np.flatnonzero(lab < 0)[0])})")
-        return lab, names
-    try:
-        lab = np.load(path) if path.suffix.lower() == ".npy" else np.loadtxt(path)
-    except (OSError, ValueError) as exc:
-        raise BSFError(f"segmentation file {path}: unreadable ({exc})") from None
-    lab = np.asarray(lab)
-    if lab.ndim != 1 or lab.size == 0 or not np.all(np.mod(lab, 1) == 0) or lab.min() < 0:
-        raise BSFError(f"segmentation file {path}: expected one non-negative integer label per "
-                       f"vertex")
-    lab = lab.astype(np.int64)
-    return lab, tuple(str(i) for i in range(int(lab.max()) + 1))
 
 
 def shape_labels(dataset: Dataset, index: int, template: np.ndarray) -> np.ndarray:
@@ -214,7 +175,7 @@ def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k
 
     Arguments:
         dataset: the ``--data`` folder.
-        segmentation: template segmentation file (:func:`load_segmentation`).
+        segmentation: template segmentation file (:func:`bsfjax.load_labels`).
         pairs, seed: number of pairs drawn by :meth:`Dataset.pairs`.
         k: basis size of the maps and of the spectral methods (spectra: ``K_SPECTRA``).
         methods, maps: subsets of :data:`METHODS` and :data:`MAPS` (default
@@ -228,7 +189,7 @@ def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k
         Rows ``{"source", "target", "kind", "map", "method", "accuracy", "unassigned",
         "iou_mean", "iou_worst", "border_accuracy", "seconds", "regime"}``.
     """
-    template, _ = load_segmentation(segmentation)
+    template, _ = load_labels(segmentation)
     _check_choices(methods, maps)
     ids = list(pair_list) if pair_list is not None else dataset.pairs(pairs, seed)
     rows = []

@@ -1,0 +1,118 @@
+"""The files of ``bsfjax transfer``: what it reads (labels, functions, maps, truths) and writes.
+
+Labels may come as one integer per vertex (``.txt`` / ``.npy``) or as SMPL's ``.json``
+``{part name: [vertex indices]}`` (:func:`bsfjax.load_labels`); a transfer of ``.json`` labels
+can be written as ``.json`` with the source's part names (:func:`bsfjax.save_labels`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+
+class CLIError(ValueError):
+    """Bad command-line input (reported as one line)."""
+
+
+def _read_array(path: str, what: str, dtype=None):
+    import numpy as np
+
+    p = Path(path)
+    if not p.exists():
+        raise CLIError(f"{what} file {p}: no such file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # loadtxt on an empty file
+            arr = np.load(p, allow_pickle=False) if p.suffix == ".npy" else np.loadtxt(p, ndmin=1)
+    except Exception as exc:
+        raise CLIError(f"{what} file {p}: cannot read ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from exc
+    if arr.size == 0:
+        raise CLIError(f"{what} file {p}: no data")
+    if not np.issubdtype(arr.dtype, np.number):
+        raise CLIError(f"{what} file {p}: expected numbers, got dtype {arr.dtype}")
+    if dtype is int and not np.issubdtype(arr.dtype, np.integer):
+        bad = ~np.isfinite(arr) | (np.mod(arr, 1) != 0) | (np.abs(arr) >= 2.0**63)
+        if bad.any():  # the value as read, not as a wrapped-around int64
+            i = int(np.argmax(bad.reshape(-1)))
+            raise CLIError(f"{what} file {p}: expected integers, found {arr.reshape(-1)[i].item()!r} "
+                           f"(entry {i})")
+        arr = arr.astype(np.int64)
+    return arr
+
+
+def _write_array(path: str, arr, names=None) -> None:
+    """``arr`` to ``path`` (``.txt`` / ``.npy``; labels also ``.json``, with their part
+    ``names``), atomically."""
+    import numpy as np
+
+    from ._files import atomic_path
+
+    p = Path(path)
+    if is_json(p) and np.issubdtype(arr.dtype, np.integer):
+        from ._label_files import save_labels
+
+        return save_labels(p, arr, names)
+    if p.suffix not in (".npy", ".txt"):
+        raise CLIError(f"--out {p}: use a .txt or .npy file name (labels: also .json)")
+    with atomic_path(p) as tmp:
+        if p.suffix == ".npy":
+            with open(tmp, "wb") as fh:
+                np.save(fh, arr)
+        else:
+            np.savetxt(tmp, arr, fmt="%d" if np.issubdtype(arr.dtype, np.integer) else "%.8g")
+
+
+def is_json(path) -> bool:
+    return path is not None and Path(path).suffix.lower() == ".json"
+
+
+def read_labels(path: str, what: str):
+    """``(labels (n,) int, names)`` of a labels file: SMPL's ``.json`` (``names`` its part
+    names) or one integer per line (``names`` ``None``)."""
+    if is_json(path):
+        from ._label_files import load_labels
+
+        return load_labels(path)
+    values = _read_array(path, what, dtype=int)
+    if values.ndim != 1:
+        raise CLIError(f"{what} file {path}: expected one label per line")
+    return values, None
+
+
+def read_values(args, n_source: int):
+    """The ``--labels`` (int, ``(n,)``) or ``--function`` (``(m, n)``) of a transfer, checked,
+    and the labels' part names (``.json`` labels; else ``None``)."""
+    names = None
+    if args.labels:
+        values, names = read_labels(args.labels, "labels")
+        if values.min() < 0:
+            raise CLIError(f"labels file {args.labels}: labels must be >= 0, got {values.min()}")
+    else:
+        values = _read_array(args.function, "function")
+        values = values.T if values.ndim == 2 else values
+    if values.shape[-1] != n_source:
+        raise CLIError(f"{'labels' if args.labels else 'function'} file has {values.shape[-1]} "
+                       f"entries per function but the source mesh has {n_source} vertices")
+    return values, names
+
+
+def coloured_point_data(result, labels: bool) -> dict:
+    """PLY vertex properties of a transfer: the result and its colours."""
+    import numpy as np
+
+    if labels:
+        from .plot import _label_colour  # the segmentation palette of the figures
+
+        rgb = _label_colour(result)
+        data = {"label": result}
+    else:
+        from matplotlib import colormaps
+
+        v = result if result.ndim == 1 else result[:, 0]
+        lo, hi = float(np.min(v)), float(np.max(v))
+        rgb = colormaps["viridis"]((v - lo) / (hi - lo if hi > lo else 1.0))[:, :3]
+        data = {"value": v}
+    rgb8 = np.clip(np.round(255 * rgb), 0, 255).astype(np.uint8)
+    data.update(red=rgb8[:, 0], green=rgb8[:, 1], blue=rgb8[:, 2])
+    return data

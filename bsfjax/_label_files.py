@@ -1,0 +1,124 @@
+"""Segmentation files: one label per vertex, in the forms users have them.
+
+* ``.json`` ``{part name: [vertex indices]}``, the SMPL body-part format (the 24-part
+  ``smpl_vert_segmentation.json`` of the SMPL / FAUST template).  A vertex listed in several
+  parts takes the first in sorted name order (the SMPL file lists some border vertices twice);
+  every vertex up to the largest index must be listed.  Label ``l`` is the ``l``-th name in
+  sorted order.
+* ``.txt`` / ``.npy``: one non-negative integer per vertex (names ``"0"``, ``"1"``, …).
+
+:func:`load_labels` reads both; :func:`save_labels` writes a segmentation atomically, a
+transferred one in the form and with the part names of its source (``bsfjax transfer --labels
+parts.json --out target_parts.json``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from ._errors import BSFError
+from ._files import atomic_path, write_text_atomic
+
+__all__ = ["LabelFile", "load_labels", "save_labels", "UNASSIGNED_PART"]
+
+#: The part under which :func:`save_labels` lists unassigned vertices (label −1) in ``.json``.
+UNASSIGNED_PART = "unassigned"
+
+
+class LabelFile(NamedTuple):
+    """A segmentation read by :func:`load_labels`."""
+
+    labels: np.ndarray  # (n,) int64, one label ≥ 0 per vertex
+    names: tuple[str, ...]  # names[l]: the name of label l
+
+
+def load_labels(path: str | os.PathLike) -> LabelFile:
+    """Read a segmentation file (module doc): ``(labels, names)``.
+
+    **Arguments:**
+
+    - ``path``: a ``.json`` ``{part name: [vertex indices]}`` file, or a ``.txt`` / ``.npy``
+      file of one non-negative integer label per vertex.
+
+    **Returns:** :class:`LabelFile` ``(labels (n,) int64, names)``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise BSFError(f"labels file {path}: no such file")
+    if path.suffix.lower() == ".json":
+        return _load_json(path)
+    try:
+        lab = np.load(path, allow_pickle=False) if path.suffix.lower() == ".npy" \
+            else np.loadtxt(path, ndmin=1)
+    except (OSError, ValueError) as exc:
+        why = (str(exc) or type(exc).__name__).splitlines()[0]
+        raise BSFError(f"labels file {path}: unreadable ({why})") from None
+    lab = np.asarray(lab)
+    if lab.ndim != 1 or lab.size == 0 or not np.issubdtype(lab.dtype, np.number) \
+            or not np.all(np.isfinite(lab)) or not np.all(np.mod(lab, 1) == 0) or lab.min() < 0:
+        raise BSFError(f"labels file {path}: expected one non-negative integer label per vertex")
+    lab = lab.astype(np.int64)
+    return LabelFile(lab, tuple(str(i) for i in range(int(lab.max()) + 1)))
+
+
+def _load_json(path: Path) -> LabelFile:
+    try:
+        parts = json.loads(path.read_text())
+        if not isinstance(parts, dict):
+            raise TypeError(f"the file holds a {type(parts).__name__}, not an object")
+        names = tuple(sorted(parts))
+        idx = [np.asarray(parts[n], dtype=np.int64).ravel() for n in names]
+    except (ValueError, TypeError, AttributeError, UnicodeDecodeError) as exc:
+        raise BSFError(f"labels file {path}: expected {{part name: [vertex indices]}} "
+                       f"({exc})") from None
+    if not names or not any(i.size for i in idx) or any(i.size and i.min() < 0 for i in idx):
+        raise BSFError(f"labels file {path}: no parts, no vertices, or negative vertex indices")
+    lab = np.full(1 + max(int(i.max()) for i in idx if i.size), -1, np.int64)
+    for i in reversed(range(len(names))):  # reversed: the first name wins
+        lab[idx[i]] = i
+    if (lab < 0).any():
+        raise BSFError(f"labels file {path}: {int((lab < 0).sum())} vertices are in no part "
+                       f"(first: {int(np.flatnonzero(lab < 0)[0])})")
+    return LabelFile(lab, names)
+
+
+def save_labels(path: str | os.PathLike, labels, names=None) -> None:
+    """Write a segmentation atomically, in the form the suffix names (module doc).
+
+    **Arguments:**
+
+    - ``path``: ``.json``, ``.txt`` or ``.npy``.
+    - ``labels``: ``(n,)`` integer labels, ``-1`` for unassigned vertices.
+    - ``names``: the name of each label (``.json``; default ``"0"``, ``"1"``, …).  Every name
+      is written, a part with no vertex as an empty list, so a transferred segmentation keeps
+      its source's parts; unassigned vertices go under :data:`UNASSIGNED_PART`.
+    """
+    path = Path(path)
+    lab = np.asarray(labels)
+    if lab.ndim != 1 or not np.issubdtype(lab.dtype, np.integer) or (lab.size and lab.min() < -1):
+        raise BSFError(f"labels must be (n,) integers >= -1, got shape {lab.shape} dtype "
+                       f"{lab.dtype}")
+    suffix = path.suffix.lower()
+    if suffix not in (".json", ".txt", ".npy"):
+        raise BSFError(f"labels file {path}: use a .json, .txt or .npy file name")
+    if suffix == ".npy":
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:  # a handle: np.save adds no suffix
+            np.save(fh, lab.astype(np.int64))
+        return
+    if suffix == ".txt":
+        write_text_atomic(path, "".join(f"{v}\n" for v in lab.tolist()))
+        return
+    n_labels = int(lab.max()) + 1 if lab.size else 0
+    names = tuple(str(i) for i in range(n_labels)) if names is None else tuple(map(str, names))
+    if len(names) < n_labels or len(set(names)) != len(names) or UNASSIGNED_PART in names:
+        raise BSFError(f"names must be {n_labels} or more distinct part names other than "
+                       f"{UNASSIGNED_PART!r}, got {len(names)}")
+    parts = {name: np.flatnonzero(lab == i).tolist() for i, name in enumerate(names)}
+    if (lab < 0).any():
+        parts[UNASSIGNED_PART] = np.flatnonzero(lab < 0).tolist()
+    write_text_atomic(path, json.dumps(parts) + "\n")
