@@ -132,7 +132,7 @@ class _Geodesics:
 
     def __init__(self, mesh: Mesh):
         self.mesh = mesh
-        self.seen = np.zeros(0, np.int64)  # vertices, in the order first asked for
+        self.seen = np.zeros(0, np.int64)  # the vertices run so far, in the order run
         self.d = np.zeros((0, 0))
 
     def among(self, vertices) -> np.ndarray:
