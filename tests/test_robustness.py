@@ -602,7 +602,7 @@ def test_cli_outputs_all_or_none(tmp_path, capsys, ns, monkeypatch):
     old = tmp_path / "m.ply"
     old.write_text("previous")
 
-    def failing_write(path, arr):
+    def failing_write(path, arr, names=None):
         with atomic_path(path) as tmp:
             tmp.write_text("partial")
             raise OSError(28, "No space left on device", str(tmp))
