@@ -1,9 +1,10 @@
 """``bsfjax transfer SOURCE TARGET [TARGET ...] --out-dir DIR``: one source to many targets.
 
 Targets are files, folders (their mesh files) or glob patterns.  Each target's result is
-written as soon as it is computed, atomically: ``DIR/<stem>.txt`` (and
+written as soon as it is computed, atomically: ``DIR/<stem>.txt`` (``DIR/<stem>.json`` with
+the source's part names for ``.json`` labels, as :func:`bsfjax.save_labels`; and
 ``MESH_DIR/<stem>.ply`` with ``--mesh-out-dir``); ``DIR/summary.json`` lists every target.
-A rerun skips the targets whose outputs are complete (unless ``--overwrite``), so an
+``--truth-dir`` holds ``<stem>.txt``, ``.npy`` or ``.json``.  A rerun skips the targets whose outputs are complete (unless ``--overwrite``), so an
 interrupted run resumes; a target that cannot be read or solved is reported and skipped, and
 the exit status is 1.  With ``--coordinator/--num-processes/--process-id`` (or inside a SLURM
 or Open MPI job) the processes of ``jax.distributed`` share the targets; each writes its own.
@@ -108,16 +109,17 @@ def _initialize_distributed(args, error) -> None:
     jax.distributed.initialize(**kwargs)
 
 
-def _complete(stem: str, out_dir: Path, mesh_dir: Path | None) -> bool:
-    return (out_dir / f"{stem}.txt").is_file() and (
+def _complete(stem: str, out_dir: Path, mesh_dir: Path | None, suffix: str) -> bool:
+    return (out_dir / f"{stem}{suffix}").is_file() and (
         mesh_dir is None or (mesh_dir / f"{stem}.ply").is_file())
 
 
-def _remove_stale_temporaries(targets, out_dir: Path, mesh_dir: Path | None) -> None:
+def _remove_stale_temporaries(targets, out_dir: Path, mesh_dir: Path | None,
+                              suffix: str) -> None:
     """Remove what a killed run (SIGKILL: no clean-up) left of its atomic writes: the
     ``.<name>.<8 random characters>.tmp<suffix>`` files of this run's outputs (the names of
     :func:`bsfjax._files.atomic_path`), never the outputs themselves."""
-    names = [(out_dir, "summary.json")] + [(out_dir, f"{p.stem}.txt") for p in targets]
+    names = [(out_dir, "summary.json")] + [(out_dir, f"{p.stem}{suffix}") for p in targets]
     if mesh_dir is not None:
         names += [(mesh_dir, f"{p.stem}.ply") for p in targets]
     for folder, name in names:
@@ -134,7 +136,8 @@ def cmd_transfer_many(args, error) -> int:
     from tqdm import tqdm
 
     from ._collection import process_share, transfer_collection
-    from ._files import atomic_path
+    from ._files import atomic_path, write_text_atomic
+    from ._label_files import _json_text
     from ._mesh import load_mesh, save_mesh
 
     targets = expand_targets(args.target, error)
@@ -145,17 +148,18 @@ def cmd_transfer_many(args, error) -> int:
     from ._cli_io import read_values
     from .cli import one_start
 
-    values, _ = read_values(args, source.n_vertices)
+    values, part_names = read_values(args, source.n_vertices)
+    suffix = ".txt" if part_names is None else ".json"  # .json labels come back as .json
     out_dir.mkdir(parents=True, exist_ok=True)
     multi = jax.process_count() > 1
     if jax.process_index() == 0:  # before the first barrier: no process is writing yet
-        _remove_stale_temporaries(targets, out_dir, mesh_dir)
+        _remove_stale_temporaries(targets, out_dir, mesh_dir, suffix)
     if multi:  # every process lists the finished targets before any of them writes
         from jax.experimental import multihost_utils
 
         multihost_utils.sync_global_devices("bsfjax transfer: start")
     todo = [i for i, p in enumerate(targets)
-            if args.overwrite or not _complete(p.stem, out_dir, mesh_dir)]
+            if args.overwrite or not _complete(p.stem, out_dir, mesh_dir, suffix)]
     if multi:
         multihost_utils.sync_global_devices("bsfjax transfer: listed")
     print(f"{len(targets)} targets: {len(targets) - len(todo)} complete (skipped), {len(todo)} "
@@ -197,8 +201,12 @@ def cmd_transfer_many(args, error) -> int:
 
             save_mesh(mesh_dir / f"{path.stem}.ply", load_mesh(path),
                       point_data=coloured_point_data(result, labels), immediate=True)
-        with atomic_path(out_dir / f"{path.stem}.txt", immediate=True) as tmp:
-            np.savetxt(tmp, result, fmt="%d" if labels else "%.8g")
+        if part_names is not None:
+            write_text_atomic(out_dir / f"{path.stem}.json", _json_text(result, part_names),
+                              immediate=True)
+        else:
+            with atomic_path(out_dir / f"{path.stem}.txt", immediate=True) as tmp:
+                np.savetxt(tmp, result, fmt="%d" if labels else "%.8g")
         records[path.stem] = rec
     bar.close()
     _write_summary(out_dir, targets, records, multi)
@@ -215,15 +223,15 @@ def cmd_transfer_many(args, error) -> int:
 def _truth(truth_dir, stem: str, n: int, error):
     if truth_dir is None:
         return None
-    import numpy as np
+    from ._cli_io import read_labels
 
-    for suffix in (".txt", ".npy"):
+    for suffix in (".txt", ".npy", ".json"):
         p = Path(truth_dir) / f"{stem}{suffix}"
         if p.is_file():
-            arr = np.load(p) if suffix == ".npy" else np.loadtxt(p, ndmin=1)
+            arr, _ = read_labels(str(p), "truth")
             if arr.shape != (n,):
                 raise error(f"truth file {p}: expected {n} labels, got shape {arr.shape}")
-            return arr.astype(np.int64)
+            return arr
     return None
 
 

@@ -113,6 +113,11 @@ def save_labels(path: str | os.PathLike, labels, names=None) -> None:
     if suffix == ".txt":
         write_text_atomic(path, "".join(f"{v}\n" for v in lab.tolist()))
         return
+    write_text_atomic(path, _json_text(lab, names))
+
+
+def _json_text(lab: np.ndarray, names) -> str:
+    """The ``.json`` form of :func:`save_labels` (checked labels)."""
     n_labels = int(lab.max()) + 1 if lab.size else 0
     names = tuple(str(i) for i in range(n_labels)) if names is None else tuple(map(str, names))
     if len(names) < n_labels or len(set(names)) != len(names) or UNASSIGNED_PART in names:
@@ -121,4 +126,4 @@ def save_labels(path: str | os.PathLike, labels, names=None) -> None:
     parts = {name: np.flatnonzero(lab == i).tolist() for i, name in enumerate(names)}
     if (lab < 0).any():
         parts[UNASSIGNED_PART] = np.flatnonzero(lab < 0).tolist()
-    write_text_atomic(path, json.dumps(parts) + "\n")
+    return json.dumps(parts) + "\n"

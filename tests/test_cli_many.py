@@ -215,3 +215,33 @@ def test_cluster_detection_and_flags(monkeypatch):
     with pytest.raises(CLIError, match="--process-id must be in"):
         _initialize_distributed(argparse.Namespace(coordinator="h:1", num_processes=2,
                                                    process_id=2), CLIError)
+
+
+def test_json_labels_come_back_as_json_per_target(files, one_process, tmp_path, capsys):
+    """SMPL-style .json labels: each target's labels as .json under the source's part names
+    (the same labels as the .txt run), a .json truth scored, and a rerun skips them."""
+    small = bsfjax.example_pair(levels=1)
+    names = [f"p{n}" for n in small.label_names]
+    lab = np.loadtxt(files / "labels.txt").astype(int)
+    (tmp_path / "parts.json").write_text(json.dumps(
+        {n: np.flatnonzero(lab == i).tolist() for i, n in enumerate(names)}))
+    (tmp_path / "truth").mkdir()
+    truth = small.labels[small.p2p]
+    (tmp_path / "truth" / "t506.json").write_text(json.dumps(
+        {n: np.flatnonzero(truth == i).tolist() for i, n in enumerate(names)}))
+    out = tmp_path / "out"
+    argv = _argv(files, out, files / "tg" / "t506.ply",
+                 extra=["--truth-dir", str(tmp_path / "truth")])
+    argv[argv.index(str(files / "labels.txt"))] = str(tmp_path / "parts.json")
+    assert main(argv) == 0
+    got = json.loads((out / "t506.json").read_text())
+    want = np.loadtxt(one_process / "t506.txt").astype(int)
+    assert got == {n: np.flatnonzero(want == i).tolist() for i, n in enumerate(names)}
+    assert not (out / "t506.txt").exists()
+    row = json.loads((out / "summary.json").read_text())["targets"][0]
+    assert row["accuracy"] == pytest.approx(
+        np.sum(np.asarray(bsfjax.spectrum(small.target, 2).mass) * (want == truth)) /
+        small.target.area, rel=1e-6)
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert "1 complete (skipped), 0 to run" in capsys.readouterr().err
