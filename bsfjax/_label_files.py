@@ -120,10 +120,12 @@ def _json_text(lab: np.ndarray, names) -> str:
     """The ``.json`` form of :func:`save_labels` (checked labels)."""
     n_labels = int(lab.max()) + 1 if lab.size else 0
     names = tuple(str(i) for i in range(n_labels)) if names is None else tuple(map(str, names))
-    if len(names) < n_labels or len(set(names)) != len(names) or UNASSIGNED_PART in names:
-        raise BSFError(f"names must be {n_labels} or more distinct part names other than "
-                       f"{UNASSIGNED_PART!r}, got {len(names)}")
+    if len(names) < n_labels or len(set(names)) != len(names):
+        raise BSFError(f"names must be {n_labels} or more distinct part names, got {len(names)}")
     parts = {name: np.flatnonzero(lab == i).tolist() for i, name in enumerate(names)}
     if (lab < 0).any():
+        if UNASSIGNED_PART in parts:
+            raise BSFError(f"a part is named {UNASSIGNED_PART!r}, the name under which the "
+                           f"unassigned vertices are written: rename it")
         parts[UNASSIGNED_PART] = np.flatnonzero(lab < 0).tolist()
     return json.dumps(parts) + "\n"

@@ -69,6 +69,9 @@ def test_bad_files_and_arguments_are_named(tmp_path):
         save_labels(tmp_path / "x.csv", np.zeros(3, int))
     with pytest.raises(BSFError, match="3 or more distinct part names"):
         save_labels(tmp_path / "x.json", np.array([0, 1, 2]), ("a", "b"))
+    save_labels(tmp_path / "x.json", np.array([0, 1]), ("a", "unassigned"))  # no -1: a name
+    with pytest.raises(BSFError, match="a part is named 'unassigned'"):
+        save_labels(tmp_path / "x.json", np.array([0, -1]), ("a", "unassigned"))
     with pytest.raises(BSFError, match="integers >= -1"):
         save_labels(tmp_path / "x.json", np.array([0.5, 1.0]))
     existing = tmp_path / "keep.json"
