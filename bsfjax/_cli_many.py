@@ -4,10 +4,11 @@ Targets are files, folders (their mesh files) or glob patterns.  Each target's r
 written as soon as it is computed, atomically: ``DIR/<stem>.txt`` (``DIR/<stem>.json`` with
 the source's part names for ``.json`` labels, as :func:`bsfjax.save_labels`; and
 ``MESH_DIR/<stem>.ply`` with ``--mesh-out-dir``); ``DIR/summary.json`` lists every target.
-``--truth-dir`` holds ``<stem>.txt``, ``.npy`` or ``.json``.  A rerun skips the targets whose outputs are complete (unless ``--overwrite``), so an
-interrupted run resumes; a target that cannot be read or solved is reported and skipped, and
-the exit status is 1.  With ``--coordinator/--num-processes/--process-id`` (or inside a SLURM
-or Open MPI job) the processes of ``jax.distributed`` share the targets; each writes its own.
+``--truth-dir`` holds ``<stem>.txt``, ``.npy`` or ``.json``.  A rerun skips the targets whose
+outputs are complete (unless ``--overwrite``), so an interrupted run resumes; a target that
+cannot be read or solved is reported and skipped, and the exit status is 1.  With
+``--coordinator/--num-processes/--process-id`` (or inside a SLURM or Open MPI job) the
+processes of ``jax.distributed`` share the targets; each writes its own.
 """
 
 from __future__ import annotations
