@@ -80,6 +80,23 @@ def read_labels(path: str, what: str):
     return values, None
 
 
+def read_truth(path: str, names):
+    """A ``--truth`` labels file, its labels numbered as the ``--labels`` file's part ``names``
+    where both are ``.json`` (each numbers its own parts in sorted order, so a truth that
+    lacks a part the source has would otherwise be compared label for label with other
+    parts)."""
+    import numpy as np
+
+    truth, truth_names = read_labels(path, "truth")
+    if names is None or truth_names is None or truth_names == tuple(names):
+        return truth
+    index = {name: i for i, name in enumerate(names)}
+    unknown = [n for n in truth_names if n not in index]
+    if unknown:
+        raise CLIError(f"truth file {path}: parts {unknown} are not parts of the labels file")
+    return np.asarray([index[n] for n in truth_names])[truth]
+
+
 def read_values(args, n_source: int):
     """The ``--labels`` (int, ``(n,)``) or ``--function`` (``(m, n)``) of a transfer, checked,
     and the labels' part names (``.json`` labels; else ``None``)."""

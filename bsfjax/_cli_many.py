@@ -190,7 +190,7 @@ def cmd_transfer_many(args, error) -> int:
         if labels:
             rec.update(unassigned_share=res.unassigned_share, regime=res.regime,
                        confidence=res.confidence, agreement=res.agreement)
-            truth = _truth(args.truth_dir, path.stem, res.n_vertices, error)
+            truth = _truth(args.truth_dir, path.stem, res.n_vertices, part_names, error)
             if truth is not None:
                 mass = res.mass
                 rec["accuracy"] = float(np.sum(mass * (res.labels == truth)) / np.sum(mass))
@@ -221,15 +221,15 @@ def cmd_transfer_many(args, error) -> int:
     return 1 if failed else 0
 
 
-def _truth(truth_dir, stem: str, n: int, error):
+def _truth(truth_dir, stem: str, n: int, names, error):
     if truth_dir is None:
         return None
-    from ._cli_io import read_labels
+    from ._cli_io import read_truth
 
     for suffix in (".txt", ".npy", ".json"):
         p = Path(truth_dir) / f"{stem}{suffix}"
         if p.is_file():
-            arr, _ = read_labels(str(p), "truth")
+            arr = read_truth(str(p), names)
             if arr.shape != (n,):
                 raise error(f"truth file {p}: expected {n} labels, got shape {arr.shape}")
             return arr

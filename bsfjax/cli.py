@@ -12,7 +12,7 @@ import warnings
 from pathlib import Path
 
 from ._cli_io import (CLIError, _read_array, _write_array, coloured_point_data, is_json,
-                      read_labels, read_values)
+                      read_truth, read_values)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -209,7 +209,7 @@ def _transfer_one(args) -> int:
     values, names = read_values(args, source.n_vertices)
     truth = None
     if args.truth:
-        truth, _ = read_labels(args.truth, "truth")
+        truth = read_truth(args.truth, names)
         if truth.shape != (target.n_vertices,):
             raise CLIError(f"truth file {args.truth}: expected one label per target vertex "
                            f"({target.n_vertices}), got shape {truth.shape}")

@@ -100,7 +100,7 @@ def test_transfer_command_labels_with_point_map(cli_files):
     np.testing.assert_array_equal(m.point_data["label"], got)
 
 
-def test_transfer_command_smpl_json_labels_in_and_out(cli_files, tmp_path):
+def test_transfer_command_smpl_json_labels_in_and_out(cli_files, tmp_path, capsys):
     """Labels as SMPL's {part: [vertices]} .json: read, pulled back through the given map, and
     written as .json with the source's part names; a .json truth is scored by those names."""
     d, pair = cli_files
@@ -120,6 +120,20 @@ def test_transfer_command_smpl_json_labels_in_and_out(cli_files, tmp_path):
     assert main(["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--function",
                  str(d / "labels.txt"), "--map", "p2p", str(d / "identity.npy"), "-k", "20",
                  "--out", str(tmp_path / "f.json")]) == 2  # a function is not written as .json
+    # a source with a part the target's truth lacks (an empty one, sorted first): the truth is
+    # compared part by part by name, not by its own numbering
+    (tmp_path / "more.json").write_text(json.dumps({"a empty part": [], **parts}))
+    capsys.readouterr()
+    assert main(["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--labels",
+                 str(tmp_path / "more.json"), "--map", "p2p", str(d / "identity.npy"), "-k",
+                 "20", "--truth", str(tmp_path / "truth.json"), "--out",
+                 str(tmp_path / "more_out.json")]) == 0
+    assert "accuracy against" in (err := capsys.readouterr().err) and "100.0% of the target" in err
+    (tmp_path / "odd.json").write_text(json.dumps({"other": list(range(len(p2p)))}))
+    assert main(["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--labels",
+                 str(tmp_path / "parts.json"), "--map", "p2p", str(d / "identity.npy"), "-k",
+                 "20", "--truth", str(tmp_path / "odd.json"), "--out", str(out)]) == 2
+    assert "parts ['other'] are not parts of the labels file" in capsys.readouterr().err
 
 
 def test_transfer_command_function_with_estimated_map(cli_files):
