@@ -12,6 +12,7 @@ the ground-truth maps; then times the default transfer (``transfer_labels``, met
     python benchmarks/bench_segmentation.py --out /tmp/seg --no-landmarks
     python benchmarks/bench_segmentation.py --out /tmp/seg --few-landmarks [--held-out]
     python benchmarks/bench_segmentation.py --out /tmp/seg --all-pairs
+    python benchmarks/bench_segmentation.py --out /tmp/seg --triangles
 
 Writes ``segmentation_bench.csv`` and ``segmentation_bench.md`` into ``--out``.
 
@@ -46,6 +47,14 @@ ground-truth images): how many a user needs.  Writes ``segmentation_fewlandmarks
 ``--held-out``: instead of the nine pairs, ten that no default was chosen on (eight FAUST,
 two FAUST_5k; stop 32's held-out check); with ``--no-landmarks`` or ``--few-landmarks`` (or
 alone: the default map).  The files' names end in ``_heldout``.
+
+``--triangles``: the SMPL parts given per triangle (each triangle takes the label of the
+majority of its corners; the PSB / COSEG form), on the nine pairs through the default and the
+ground-truth maps: p2p and ``refined`` by :func:`bsfjax.transfer_face_labels`, beside the same
+methods on the vertex labels; accuracy is the share of the target's area (triangles' areas,
+vertices' masses) labelled correctly.  Then the two transfers' seconds after the map on FAUST
+000→010 (median of ``--repeats`` warm calls, the same run).  Writes
+``segmentation_triangles.csv`` and ``.md``.
 
 ``--all-pairs``: p2p and ``refined`` on every ordered pair of each folder (72 FAUST, 12
 FAUST_5k), through the default map and the map estimated without landmarks (about 11 minutes
@@ -118,6 +127,82 @@ def changed_targets(data: Path, seg: Path, out: Path, cache, variants, change, k
     write_csv(rows, out / f"{stem}.csv")
     (out / f"{stem}.md").write_text("\n".join(md))
     print("\n".join(md))
+    return 0
+
+
+def triangle_labels(mesh, labels: np.ndarray) -> np.ndarray:
+    """Each triangle's label: the majority of its corners' (the first corner's if all
+    differ)."""
+    a, b, c = labels[mesh.faces].T
+    return np.where((b == c) & (a != b), b, a)
+
+
+def triangles_report(data: Path, seg: Path, out: Path, cache, repeats: int) -> int:
+    """``--triangles`` (module doc)."""
+    from bsfjax._highlevel import ZOOMOUT_SAMPLES
+    from bsfjax.experiments.segmentation import N_LANDMARKS, _maps, gt_inverse
+
+    template, _ = bj.load_labels(seg)
+    rows, timing = [], ""
+    for name, pairs in PAIRS.items():
+        ds = load_dataset(data / name)
+        index = {e.name: i for i, e in enumerate(ds.shapes)}
+        for a, b in pairs:
+            i, j = index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]
+            src, tgt = ds.shapes[i].mesh, ds.shapes[j].mesh
+            sm, sn = (bj.spectrum(m, K_SPECTRA, cache_dir=cache) for m in (src, tgt))
+            lab_m, lab_n = shape_labels(ds, i, template), shape_labels(ds, j, template)
+            tri_m, tri_n = triangle_labels(src, lab_m), triangle_labels(tgt, lab_n)
+            gt = ds.ground_truth(i, j)
+            lm = np.asarray(bj.farthest_point_sampling(src, N_LANDMARKS))
+            maps = _maps(sm, sn, gt, 30, (lm, gt_inverse(gt, lm, tgt, src)), (src, tgt),
+                         ("default", "truth"))
+            samples = (bj.subsample(src, ZOOMOUT_SAMPLES), bj.subsample(tgt, ZOOMOUT_SAMPLES))
+            area, mass = tgt.face_areas(), np.asarray(sn.mass)
+            for map_name, (C, p2p) in maps.items():
+                kw = dict(C=C, p2p=p2p, samples=samples)
+                for method in ("p2p", "refined"):
+                    by_vertex = bj.transfer_labels(sm, sn, lab_m, method=method, mesh=src, **kw)
+                    by_triangle = bj.transfer_face_labels(sm, sn, tri_m, source_mesh=src,
+                                                          target_mesh=tgt, method=method, **kw)
+                    rows.append({"source": f"{name}/tr_reg_{a}", "target": f"tr_reg_{b}",
+                                 "map": map_name, "method": method,
+                                 "vertices %": round(100 * float(np.sum(
+                                     mass * (by_vertex.labels == lab_n)) / mass.sum()), 2),
+                                 "triangles %": round(100 * float(np.sum(
+                                     area * (by_triangle.labels == tri_n)) / area.sum()), 2)})
+                    print(rows[-1], file=sys.stderr)
+            if (name, a, b) == ("faust", "000", "010"):
+                C, p2p = maps["default"]
+                kw = dict(C=C, p2p=p2p, samples=samples)
+                calls = {"vertices": lambda: bj.transfer_labels(sm, sn, lab_m, **kw),
+                         "triangles": lambda: bj.transfer_face_labels(
+                             sm, sn, tri_m, source_mesh=src, target_mesh=tgt, **kw)}
+                med = {}
+                for what, call in calls.items():
+                    times = []
+                    for _ in range(repeats + 1):
+                        t0 = time.perf_counter()
+                        call()
+                        times.append(time.perf_counter() - t0)
+                    med[what] = float(np.median(times[1:]))
+                timing = (f"'refined' after the default map, FAUST 000→010 (6890 vertices, "
+                          f"13776 triangles, 24 parts), median of {repeats} warm calls: "
+                          f"triangles {med['triangles']:.3f} s, vertices {med['vertices']:.3f} "
+                          f"s in the same run; {os.cpu_count()} CPUs.")
+    write_csv(rows, out / "segmentation_triangles.csv")
+    keys = list(rows[0])
+    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    lines += ["| " + " | ".join(str(r[k]) for k in keys) + " |" for r in rows]
+    for map_name in ("default", "truth"):
+        for method in ("p2p", "refined"):
+            sel = [r for r in rows if r["map"] == map_name and r["method"] == method]
+            lines.append(f"| mean | | {map_name} | {method} | "
+                         f"{np.mean([r['vertices %'] for r in sel]):.2f} | "
+                         f"{np.mean([r['triangles %'] for r in sel]):.2f} |")
+    md = "\n".join(lines) + "\n\n" + timing + "\n"
+    (out / "segmentation_triangles.md").write_text(md)
+    print(md)
     return 0
 
 
@@ -283,6 +368,8 @@ def main(argv=None) -> int:
                     help="the ten held-out pairs instead of the nine")
     ap.add_argument("--all-pairs", action="store_true",
                     help="p2p and refined on every ordered pair, default and landmark-free maps")
+    ap.add_argument("--triangles", action="store_true",
+                    help="the parts given per triangle: p2p and refined, default and true maps")
     args = ap.parse_args(argv)
     data = Path(args.data)
     seg = data / "segmentations" / "smpl_vert_segmentation.json"
@@ -291,6 +378,8 @@ def main(argv=None) -> int:
     if args.decimated:
         return changed_targets(data, seg, out, args.cache, REDUCTIONS, _decimate, "reduction",
                                "segmentation_decimated")
+    if args.triangles:
+        return triangles_report(data, seg, out, args.cache, args.repeats)
     if args.stretched:
         return changed_targets(data, seg, out, args.cache, ("taller", "wider", "longer torso"),
                                _stretch, "deformation", "segmentation_stretched")

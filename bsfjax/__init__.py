@@ -6,7 +6,7 @@ Sparse representation and transfer of step functions on manifolds, after S. Melz
 The public names, grouped by pipeline stage (data flows downwards only; one private module
 owns each step, see ``docs/architecture.md``)::
 
-    mesh        Mesh, load_mesh, save_mesh, mesh_report, example_pair        _mesh, _example
+    mesh        Mesh, load_mesh, save_mesh, mesh_report, example_pair   _mesh, _mesh_write, _example
                 load_labels, save_labels (segmentation files, SMPL's .json)   _label_files
     operators   laplacian -> (W, A)                                           _laplacian
     spectrum    Spectrum, spectrum, spectrum_from_operators                   _spectrum
@@ -19,6 +19,7 @@ owns each step, see ``docs/architecture.md``)::
                 map_distortion, orientation_agreement, choose_map             _distortion
                 mirror_symmetry                                               _highlevel
     mesh level  transfer_values, transfer_labels                              _highlevel
+                transfer_face_labels, face_label_shares (labels per triangle) _face_labels
     collection  transfer_collection (one source to many targets, batched)    _collection
     metrics     relative_error, labels_to_indicators, random_indicators       _metrics, _indicators
     experiments bsfjax.experiments (the paper's tables and figures), bsfjax.plot, bsfjax.cli
@@ -35,7 +36,8 @@ from importlib.metadata import PackageNotFoundError, version as _version
 from ._errors import BSFError, MeshError
 
 # mesh
-from ._mesh import Mesh, MeshReport, load_mesh, mesh_report, save_mesh
+from ._mesh import Mesh, MeshReport, load_mesh, mesh_report
+from ._mesh_write import save_mesh
 from ._example import ExamplePair, example_mesh, example_pair
 
 # operators and spectrum
@@ -76,14 +78,16 @@ from ._orientation import OrientationBasis, orientation_bases
 from ._distortion import choose_map, map_distortion, orientation_agreement
 
 # mesh-level entry points
-from ._highlevel import (LabelTransfer, MapEstimate, estimate_map, mirror_symmetry,
+from ._highlevel import (REGIMES, LabelTransfer, MapEstimate, estimate_map, mirror_symmetry,
                          transfer_labels, transfer_values)
+from ._face_labels import (FaceShares, decide_face_labels, face_label_shares, face_scores,
+                           transfer_face_labels)
 from ._collection import TargetTransfer, size_bucket, transfer_collection
 
 # metrics and test functions
 from ._metrics import relative_error
 from ._indicators import indicators_to_labels, labels_to_indicators, random_indicators
-from ._label_files import LabelFile, load_labels, save_labels
+from ._label_files import LabelFile, is_face_file, load_labels, save_labels
 
 try:
     __version__ = _version("bsfjax")
@@ -118,9 +122,11 @@ __all__ = [
     "map_distortion", "orientation_agreement",
     "choose_map",
     # mesh level
-    "MapEstimate", "estimate_map", "mirror_symmetry", "LabelTransfer", "transfer_values", "transfer_labels",
-    "transfer_collection", "TargetTransfer", "size_bucket",
+    "MapEstimate", "estimate_map", "mirror_symmetry", "LabelTransfer", "REGIMES",
+    "transfer_values", "transfer_labels",
+    "transfer_face_labels", "face_label_shares", "face_scores", "decide_face_labels",
+    "FaceShares", "transfer_collection", "TargetTransfer", "size_bucket",
     # metrics
     "relative_error", "indicators_to_labels", "labels_to_indicators", "random_indicators",
-    "LabelFile", "load_labels", "save_labels",
+    "LabelFile", "load_labels", "save_labels", "is_face_file",
 ]

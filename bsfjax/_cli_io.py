@@ -1,8 +1,10 @@
 """The files of ``bsfjax transfer``: what it reads (labels, functions, maps, truths) and writes.
 
-Labels may come as one integer per vertex (``.txt`` / ``.npy``) or as SMPL's ``.json``
-``{part name: [vertex indices]}`` (:func:`bsfjax.load_labels`); a transfer of ``.json`` labels
-can be written as ``.json`` with the source's part names (:func:`bsfjax.save_labels`).
+Labels may come as one integer per vertex (``.txt`` / ``.npy``), as SMPL's ``.json``
+``{part name: [vertex indices]}`` (:func:`bsfjax.load_labels`), or as one integer per triangle
+(``.seg``, or a ``.txt`` / ``.npy`` with as many entries as the source has triangles;
+:func:`bsfjax.transfer_face_labels`); a transfer of ``.json`` labels can be written as
+``.json`` with the source's part names (:func:`bsfjax.save_labels`).
 """
 
 from __future__ import annotations
@@ -43,18 +45,18 @@ def _read_array(path: str, what: str, dtype=None):
 
 def _write_array(path: str, arr, names=None) -> None:
     """``arr`` to ``path`` (``.txt`` / ``.npy``; labels also ``.json``, with their part
-    ``names``), atomically."""
+    ``names``, and ``.seg``), atomically."""
     import numpy as np
 
     from ._files import atomic_path
 
     p = Path(path)
-    if is_json(p) and np.issubdtype(arr.dtype, np.integer):
-        from ._label_files import save_labels
+    from ._label_files import is_face_file, save_labels
 
+    if (is_json(p) or is_face_file(p)) and np.issubdtype(arr.dtype, np.integer):
         return save_labels(p, arr, names)
     if p.suffix not in (".npy", ".txt"):
-        raise CLIError(f"--out {p}: use a .txt or .npy file name (labels: also .json)")
+        raise CLIError(f"--out {p}: use a .txt or .npy file name (labels: also .json or .seg)")
     with atomic_path(p) as tmp:
         if p.suffix == ".npy":
             with open(tmp, "wb") as fh:
@@ -68,16 +70,12 @@ def is_json(path) -> bool:
 
 
 def read_labels(path: str, what: str):
-    """``(labels (n,) int, names)`` of a labels file: SMPL's ``.json`` (``names`` its part
-    names) or one integer per line (``names`` ``None``)."""
-    if is_json(path):
-        from ._label_files import load_labels
+    """``(labels (n,) int, names)`` of a labels file (:func:`bsfjax.load_labels`, which reads
+    every labels file of the command): ``names`` the part names of a ``.json`` file, else
+    ``None``."""
+    from ._label_files import _load
 
-        return load_labels(path)
-    values = _read_array(path, what, dtype=int)
-    if values.ndim != 1:
-        raise CLIError(f"{what} file {path}: expected one label per line")
-    return values, None
+    return _load(path, what)
 
 
 def read_truth(path: str, names):
@@ -97,21 +95,29 @@ def read_truth(path: str, names):
     return np.asarray([index[n] for n in truth_names])[truth]
 
 
-def read_values(args, n_source: int):
-    """The ``--labels`` (int, ``(n,)``) or ``--function`` (``(m, n)``) of a transfer, checked,
-    and the labels' part names (``.json`` labels; else ``None``)."""
-    names = None
+def read_values(args, source):
+    """The ``--labels`` (int, ``(n,)``) or ``--function`` (``(m, n)``) of a transfer from the
+    mesh ``source``, checked; the labels' part names (``.json`` labels; else ``None``); and
+    whether the labels are one per triangle (a ``.seg`` file, or as many labels as ``source``
+    has triangles and not vertices)."""
+    from ._label_files import is_face_file
+
+    names, per_face, n = None, False, source.n_vertices
     if args.labels:
         values, names = read_labels(args.labels, "labels")
-        if values.min() < 0:
-            raise CLIError(f"labels file {args.labels}: labels must be >= 0, got {values.min()}")
+        per_face = is_face_file(args.labels) or (
+            not is_json(args.labels) and values.shape[-1] == source.n_faces != n)
+        if per_face and values.shape != (source.n_faces,):
+            raise CLIError(f"labels file {args.labels}: a .seg file has one label per triangle "
+                           f"({source.n_faces} on the source mesh), got {values.shape[-1]}")
     else:
         values = _read_array(args.function, "function")
         values = values.T if values.ndim == 2 else values
-    if values.shape[-1] != n_source:
+    if not per_face and values.shape[-1] != n:
+        also = f" and {source.n_faces} triangles" if args.labels else ""
         raise CLIError(f"{'labels' if args.labels else 'function'} file has {values.shape[-1]} "
-                       f"entries per function but the source mesh has {n_source} vertices")
-    return values, names
+                       f"entries per function but the source mesh has {n} vertices{also}")
+    return values, names, per_face
 
 
 def coloured_point_data(result, labels: bool) -> dict:

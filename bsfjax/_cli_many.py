@@ -2,11 +2,12 @@
 
 Targets are files, folders (their mesh files) or glob patterns.  Each target's result is
 written as soon as it is computed, atomically: ``DIR/<stem>.txt`` (``DIR/<stem>.json`` with
-the source's part names for ``.json`` labels, as :func:`bsfjax.save_labels`; and
+the source's part names for ``.json`` labels, as :func:`bsfjax.save_labels`;
+``DIR/<stem>.seg`` for labels of triangles, as :func:`bsfjax.transfer_face_labels`; and
 ``MESH_DIR/<stem>.ply`` with ``--mesh-out-dir``); ``DIR/summary.json`` lists every target.
-``--truth-dir`` holds ``<stem>.txt``, ``.npy`` or ``.json``.  A rerun skips the targets whose
-outputs are complete (unless ``--overwrite``), so an interrupted run resumes; a target that
-cannot be read or solved is reported and skipped, and the exit status is 1.  With
+``--truth-dir`` holds ``<stem>.txt``, ``.npy``, ``.json`` or ``.seg``.  A rerun skips the
+targets whose outputs are complete (unless ``--overwrite``), so an interrupted run resumes; a
+target that cannot be read or solved is reported and skipped, and the exit status is 1.  With
 ``--coordinator/--num-processes/--process-id`` (or inside a SLURM or Open MPI job) the
 processes of ``jax.distributed`` share the targets; each writes its own.
 """
@@ -139,7 +140,8 @@ def cmd_transfer_many(args, error) -> int:
     from ._collection import process_share, transfer_collection
     from ._files import atomic_path, write_text_atomic
     from ._label_files import _json_text
-    from ._mesh import load_mesh, save_mesh
+    from ._mesh import load_mesh
+    from ._mesh_write import save_mesh
 
     targets = expand_targets(args.target, error)
     out_dir = Path(args.out_dir)
@@ -149,8 +151,15 @@ def cmd_transfer_many(args, error) -> int:
     from ._cli_io import read_values
     from .cli import one_start
 
-    values, part_names = read_values(args, source.n_vertices)
-    suffix = ".txt" if part_names is None else ".json"  # .json labels come back as .json
+    values, part_names, per_face = read_values(args, source)
+    # .json labels come back as .json, triangles' labels as .seg
+    suffix = ".seg" if per_face else ".txt" if part_names is None else ".json"
+    if per_face:  # each label's share of the vertices' stars goes across as a function
+        from ._face_labels import decide_face_labels, face_label_shares
+        from ._highlevel import _split_label_kwargs
+
+        shares = face_label_shares(source, values)
+        _, _, threshold, refined = _split_label_kwargs(args.method, args.threshold, {})
     out_dir.mkdir(parents=True, exist_ok=True)
     multi = jax.process_count() > 1
     if jax.process_index() == 0:  # before the first barrier: no process is writing yet
@@ -169,7 +178,8 @@ def cmd_transfer_many(args, error) -> int:
     failed = 0
     labels = args.labels is not None
     results = transfer_collection(
-        source, values, [targets[i] for i in todo], labels=labels, method=args.method, k=args.k,
+        source, shares.shares if per_face else values, [targets[i] for i in todo],
+        labels=labels and not per_face, method=args.method, k=args.k,
         landmarks=lambda j: landmarks.get(todo[j]), threshold=args.threshold,
         errors="report", spectrum_cache=args.spectrum_cache,
         batch=1 if args.batch is None else args.batch, starts=one_start(args, args.k))
@@ -188,11 +198,15 @@ def cmd_transfer_many(args, error) -> int:
         rec = {"target": str(path), "status": "ok", "vertices": res.n_vertices,
                "map_energy": res.map_energy, "seconds": round(res.seconds, 4)}
         if labels:
+            mass, n = res.mass, res.n_vertices
+            if per_face:
+                target = load_mesh(path)
+                mass, n = target.face_areas(), target.n_faces
+                res = decide_face_labels(target, shares, res.values, res.p2p, threshold, refined)
             rec.update(unassigned_share=res.unassigned_share, regime=res.regime,
                        confidence=res.confidence, agreement=res.agreement)
-            truth = _truth(args.truth_dir, path.stem, res.n_vertices, part_names, error)
+            truth = _truth(args.truth_dir, path.stem, n, part_names, error, per_face)
             if truth is not None:
-                mass = res.mass
                 rec["accuracy"] = float(np.sum(mass * (res.labels == truth)) / np.sum(mass))
             result = res.labels.astype(np.int64)
         else:
@@ -200,13 +214,14 @@ def cmd_transfer_many(args, error) -> int:
         if mesh_dir is not None:
             from ._cli_io import coloured_point_data
 
-            save_mesh(mesh_dir / f"{path.stem}.ply", load_mesh(path),
-                      point_data=coloured_point_data(result, labels), immediate=True)
+            coloured = coloured_point_data(result, labels)
+            save_mesh(mesh_dir / f"{path.stem}.ply", load_mesh(path), immediate=True,
+                      **({"cell_data": coloured} if per_face else {"point_data": coloured}))
         if part_names is not None:
             write_text_atomic(out_dir / f"{path.stem}.json", _json_text(result, part_names),
                               immediate=True)
         else:
-            with atomic_path(out_dir / f"{path.stem}.txt", immediate=True) as tmp:
+            with atomic_path(out_dir / f"{path.stem}{suffix}", immediate=True) as tmp:
                 np.savetxt(tmp, result, fmt="%d" if labels else "%.8g")
         records[path.stem] = rec
     bar.close()
@@ -221,17 +236,18 @@ def cmd_transfer_many(args, error) -> int:
     return 1 if failed else 0
 
 
-def _truth(truth_dir, stem: str, n: int, names, error):
+def _truth(truth_dir, stem: str, n: int, names, error, per_face: bool = False):
     if truth_dir is None:
         return None
     from ._cli_io import read_truth
 
-    for suffix in (".txt", ".npy", ".json"):
+    for suffix in (".txt", ".npy", ".json", ".seg"):
         p = Path(truth_dir) / f"{stem}{suffix}"
         if p.is_file():
             arr = read_truth(str(p), names)
             if arr.shape != (n,):
-                raise error(f"truth file {p}: expected {n} labels, got shape {arr.shape}")
+                raise error(f"truth file {p}: expected {n} labels (one per target "
+                            f"{'triangle' if per_face else 'vertex'}), got shape {arr.shape}")
             return arr
     return None
 

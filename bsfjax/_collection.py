@@ -52,7 +52,7 @@ from ._errors import BSFError
 from ._orientation import _geometry
 from ._fmap import _default_chunk
 from ._highlevel import LANDMARK_FREE_STARTS, WKS_VARIANCE, ZOOMOUT_SAMPLES, _check_landmarks, \
-    _check_starts, _regime, estimate_map, mirror_symmetry
+    _check_starts, _decide_labels, default_threshold, estimate_map, mirror_symmetry
 from ._indicators import labels_to_indicators
 from ._mesh import Mesh, load_mesh
 from ._methods import BSF, GeodesicBalls, RefinedPullBack, SaturatedHeat, as_method, \
@@ -279,7 +279,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                            f"n_source = {n_m}, got {vals.shape}")
     refined = isinstance(method, RefinedPullBack)
     if threshold is None:
-        threshold = 0.0 if refined else 0.5
+        threshold = default_threshold(method)
     k_map = 2 * k
     k_spec = max(k_map, REFINE_EIGENPAIRS) if getattr(method, "full_spectra", False) else k_map
     if k_spec >= n_m:
@@ -388,12 +388,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             lab = agree = conf = regime = None
             share_un = 0.0
             if labels:
-                best = vals_j.max(axis=0)
-                lab = np.where(best < threshold, -1, ids[vals_j.argmax(axis=0)].astype(np.int64))
-                share_un = float(np.sum(mass * (lab < 0)) / np.sum(mass))
-                agree = float(np.sum(mass * (vals[p2p] == lab)) / np.sum(mass))
-                conf = float(np.sum(mass * best) / np.sum(mass))
-                regime = _regime(agree, conf) if refined else None
+                lab, _, share_un, agree, conf, regime = _decide_labels(
+                    ids, vals_j, mass, threshold, refined, vals[p2p])
             yield tg.index, TargetTransfer(
                 labels=lab, values=vals_j, p2p=p2p,
                 C=map_to_unit_area(o["C"].astype(np.float64), *tg.factors, inverse=True),

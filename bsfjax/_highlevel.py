@@ -504,34 +504,64 @@ def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, "
       from an estimated map; needs ``p2p`` or ``C`` and spectra of ~100 eigenpairs); ``"p2p"``
       for a map that is already right (a registration); the paper's BSF is ``"omp"``.
     - ``threshold``: default 0.5 (the midpoint of an indicator's two values) and 0 for
-      ``"refined"``, whose scores are vote shares (every vertex takes its plurality label).
+      ``"p2p"`` and ``"refined"``, whose scores are shares (every vertex takes its plurality
+      label).
     """
     lab = np.asarray(labels)
     if lab.shape != (source.n_vertices,):
         raise BSFError(f"labels must have one entry per source vertex ({source.n_vertices}), got "
                        f"shape {lab.shape}")
-    # the rest: method options
-    inputs = {"C", "p2p", "k", "centers", "n_bsf", "seed", "mesh", "samples"}
-    method = as_method(method, **{k: v for k, v in kwargs.items() if k not in inputs})
-    kwargs = {k: v for k, v in kwargs.items() if k in inputs}
-    refined = isinstance(method, RefinedPullBack)
-    if threshold is None:
-        threshold = 0.0 if refined else 0.5
-    if not 0 <= threshold < 1:
-        raise BSFError(f"threshold must be in [0, 1), got {threshold!r}")
+    method, inputs, threshold, refined = _split_label_kwargs(method, threshold, kwargs)
     # one indicator per label *present*, whatever the ids (an id of 1e12 allocates nothing)
     ids, codes = compact_labels(lab)
     scores = transfer_values(source, target,
                              np.asarray(labels_to_indicators(codes, len(ids))), method=method,
-                             **kwargs)
+                             **inputs)
+    p2p = inputs.get("p2p")
+    return _decide_labels(ids, scores, np.asarray(target.mass, dtype=float), threshold, refined,
+                          None if p2p is None else lab[np.asarray(p2p)])
+
+
+#: What ``transfer_labels`` passes on to :func:`transfer_values` as inputs; its other keyword
+#: arguments are options of the method.
+_LABEL_INPUTS = frozenset({"C", "p2p", "k", "centers", "n_bsf", "seed", "mesh", "samples"})
+
+
+def _split_label_kwargs(method, threshold, kwargs):
+    """``(method, inputs, threshold, refined)`` of a label transfer: the method built with its
+    options from ``kwargs``, the rest of ``kwargs`` (the pair's inputs), the threshold with
+    its default, and whether the method is ``"refined"``."""
+    method = as_method(method, **{k: v for k, v in kwargs.items() if k not in _LABEL_INPUTS})
+    inputs = {k: v for k, v in kwargs.items() if k in _LABEL_INPUTS}
+    refined = isinstance(method, RefinedPullBack)
+    if threshold is None:
+        threshold = default_threshold(method)
+    if not 0 <= threshold < 1:
+        raise BSFError(f"threshold must be in [0, 1), got {threshold!r}")
+    return method, inputs, threshold, refined
+
+
+def default_threshold(method: AbstractMethod) -> float:
+    """The score below which a label transfer leaves an element unassigned, by default: 0 for
+    the pull-backs (``"p2p"``, ``"refined"``), whose scores are shares (of the maps' votes, of
+    a triangle's neighbourhood), so every element takes its plurality label; 0.5, the midpoint
+    of an indicator's two values, for the methods that reconstruct indicators."""
+    return 0.0 if isinstance(method, (PullBack, RefinedPullBack)) else 0.5
+
+
+def _decide_labels(ids, scores, weights, threshold: float, refined: bool,
+                   reference) -> LabelTransfer:
+    """The :class:`LabelTransfer` of label ``scores`` ``(L, m)`` (row ``i``: label ``ids[i]``)
+    on ``m`` elements of areas ``weights``: the arg-max, −1 below ``threshold``; ``reference``:
+    the labels of the input map's pull-back (``None``: no input point map)."""
+    scores = np.asarray(scores)
     best = scores.max(axis=0)
     out = np.where(best < threshold, -1, ids[scores.argmax(axis=0)].astype(np.int64))
-    mass = np.asarray(target.mass, dtype=float)
-    share = float(np.sum(mass * (out < 0)) / np.sum(mass))
-    p2p = kwargs.get("p2p")
-    agreement = (None if p2p is None else
-                 float(np.sum(mass * (lab[np.asarray(p2p)] == out)) / np.sum(mass)))
-    confidence = float(np.sum(mass * best) / np.sum(mass))
+    total = np.sum(weights)
+    share = float(np.sum(weights * (out < 0)) / total)
+    agreement = (None if reference is None else
+                 float(np.sum(weights * (np.asarray(reference) == out)) / total))
+    confidence = float(np.sum(weights * best) / total)
     return LabelTransfer(labels=out, scores=scores, unassigned_share=share, agreement=agreement,
                          confidence=confidence,
                          regime=_regime(agreement, confidence) if refined else None)

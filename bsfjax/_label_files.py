@@ -5,7 +5,12 @@
   parts takes the first in sorted name order (the SMPL file lists some border vertices twice);
   every vertex up to the largest index must be listed.  Label ``l`` is the ``l``-th name in
   sorted order.
-* ``.txt`` / ``.npy``: one non-negative integer per vertex (names ``"0"``, ``"1"``, …).
+* ``.txt`` / ``.npy``: one non-negative integer per vertex (no names: a label is its own
+  name, and an id of 10¹² allocates nothing).
+* ``.seg``: one non-negative integer per *triangle*, the form of the Princeton Segmentation
+  Benchmark and COSEG (:func:`is_face_file`; transferred with
+  :func:`bsfjax.transfer_face_labels`).  A ``.txt`` / ``.npy`` file with one label per
+  triangle is read the same way; which one it is, only the mesh tells.
 
 :func:`load_labels` reads both; :func:`save_labels` writes a segmentation atomically, a
 transferred one in the form and with the part names of its source (``bsfjax transfer --labels
@@ -16,6 +21,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -24,17 +30,25 @@ import numpy as np
 from ._errors import BSFError
 from ._files import atomic_path, write_text_atomic
 
-__all__ = ["LabelFile", "load_labels", "save_labels", "UNASSIGNED_PART"]
+__all__ = ["LabelFile", "load_labels", "save_labels", "is_face_file", "UNASSIGNED_PART"]
+
+#: Suffixes of files with one label per triangle.
+FACE_SUFFIXES = (".seg",)
 
 #: The part under which :func:`save_labels` lists unassigned vertices (label −1) in ``.json``.
 UNASSIGNED_PART = "unassigned"
+
+
+def is_face_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` names a file of one label per triangle (``.seg``) by its suffix."""
+    return Path(path).suffix.lower() in FACE_SUFFIXES
 
 
 class LabelFile(NamedTuple):
     """A segmentation read by :func:`load_labels`."""
 
     labels: np.ndarray  # (n,) int64, one label ≥ 0 per vertex
-    names: tuple[str, ...]  # names[l]: the name of label l
+    names: tuple[str, ...] | None  # names[l]: the name of label l (.json); None otherwise
 
 
 def load_labels(path: str | os.PathLike) -> LabelFile:
@@ -42,31 +56,45 @@ def load_labels(path: str | os.PathLike) -> LabelFile:
 
     **Arguments:**
 
-    - ``path``: a ``.json`` ``{part name: [vertex indices]}`` file, or a ``.txt`` / ``.npy``
-      file of one non-negative integer label per vertex.
+    - ``path``: a ``.json`` ``{part name: [vertex indices]}`` file, a ``.txt`` / ``.npy``
+      file of one non-negative integer label per vertex, or a ``.seg`` file of one per
+      triangle.
 
     **Returns:** :class:`LabelFile` ``(labels (n,) int64, names)``.
     """
+    return _load(path, "labels")
+
+
+def _load(path, what: str) -> LabelFile:
+    """:func:`load_labels`, its messages naming the file as ``what`` (``bsfjax transfer``'s
+    ``--truth`` files are read here too)."""
     path = Path(path)
     if not path.is_file():
-        raise BSFError(f"labels file {path}: no such file")
+        raise BSFError(f"{what} file {path}: no such file")
     if path.suffix.lower() == ".json":
-        return _load_json(path)
+        return _load_json(path, what)
     try:
-        lab = np.load(path, allow_pickle=False) if path.suffix.lower() == ".npy" \
-            else np.loadtxt(path, ndmin=1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # loadtxt on an empty file
+            lab = np.load(path, allow_pickle=False) if path.suffix.lower() == ".npy" \
+                else np.loadtxt(path, ndmin=1)
     except (OSError, ValueError) as exc:
         why = (str(exc) or type(exc).__name__).splitlines()[0]
-        raise BSFError(f"labels file {path}: unreadable ({why})") from None
+        raise BSFError(f"{what} file {path}: unreadable ({why})") from None
     lab = np.asarray(lab)
-    if lab.ndim != 1 or lab.size == 0 or not np.issubdtype(lab.dtype, np.number) \
-            or not np.all(np.isfinite(lab)) or not np.all(np.mod(lab, 1) == 0) or lab.min() < 0:
-        raise BSFError(f"labels file {path}: expected one non-negative integer label per vertex")
-    lab = lab.astype(np.int64)
-    return LabelFile(lab, tuple(str(i) for i in range(int(lab.max()) + 1)))
+    expected = (f"{what} file {path}: expected one non-negative integer label per "
+                f"{'triangle' if is_face_file(path) else 'vertex'}")
+    if lab.ndim != 1 or lab.size == 0 or not np.issubdtype(lab.dtype, np.number):
+        raise BSFError(f"{expected}, got {'no data' if lab.size == 0 else f'shape {lab.shape}'}"
+                       f"{'' if np.issubdtype(lab.dtype, np.number) else f' of {lab.dtype}'}")
+    bad = ~np.isfinite(lab) | (np.mod(lab, 1) != 0) | (lab < 0) | (lab >= 2.0 ** 63)
+    if bad.any():  # the value as read, not as a wrapped-around int64
+        i = int(np.argmax(bad))
+        raise BSFError(f"{expected}, found {lab[i].item()!r} (entry {i})")
+    return LabelFile(lab.astype(np.int64), None)
 
 
-def _load_json(path: Path) -> LabelFile:
+def _load_json(path: Path, what: str) -> LabelFile:
     try:
         parts = json.loads(path.read_text())
         if not isinstance(parts, dict):
@@ -74,15 +102,15 @@ def _load_json(path: Path) -> LabelFile:
         names = tuple(sorted(parts))
         idx = [np.asarray(parts[n], dtype=np.int64).ravel() for n in names]
     except (ValueError, TypeError, AttributeError, UnicodeDecodeError) as exc:
-        raise BSFError(f"labels file {path}: expected {{part name: [vertex indices]}} "
+        raise BSFError(f"{what} file {path}: expected {{part name: [vertex indices]}} "
                        f"({exc})") from None
     if not names or not any(i.size for i in idx) or any(i.size and i.min() < 0 for i in idx):
-        raise BSFError(f"labels file {path}: no parts, no vertices, or negative vertex indices")
+        raise BSFError(f"{what} file {path}: no parts, no vertices, or negative vertex indices")
     lab = np.full(1 + max(int(i.max()) for i in idx if i.size), -1, np.int64)
     for i in reversed(range(len(names))):  # reversed: the first name wins
         lab[idx[i]] = i
     if (lab < 0).any():
-        raise BSFError(f"labels file {path}: {int((lab < 0).sum())} vertices are in no part "
+        raise BSFError(f"{what} file {path}: {int((lab < 0).sum())} vertices are in no part "
                        f"(first: {int(np.flatnonzero(lab < 0)[0])})")
     return LabelFile(lab, names)
 
@@ -92,8 +120,8 @@ def save_labels(path: str | os.PathLike, labels, names=None) -> None:
 
     **Arguments:**
 
-    - ``path``: ``.json``, ``.txt`` or ``.npy``.
-    - ``labels``: ``(n,)`` integer labels, ``-1`` for unassigned vertices.
+    - ``path``: ``.json``, ``.txt``, ``.npy`` or (labels of triangles) ``.seg``.
+    - ``labels``: ``(n,)`` integer labels, ``-1`` for unassigned vertices (or triangles).
     - ``names``: the name of each label (``.json``; default ``"0"``, ``"1"``, …).  Every name
       is written, a part with no vertex as an empty list, so a transferred segmentation keeps
       its source's parts; unassigned vertices go under :data:`UNASSIGNED_PART`.
@@ -104,13 +132,13 @@ def save_labels(path: str | os.PathLike, labels, names=None) -> None:
         raise BSFError(f"labels must be (n,) integers >= -1, got shape {lab.shape} dtype "
                        f"{lab.dtype}")
     suffix = path.suffix.lower()
-    if suffix not in (".json", ".txt", ".npy"):
-        raise BSFError(f"labels file {path}: use a .json, .txt or .npy file name")
+    if suffix not in (".json", ".txt", ".npy", *FACE_SUFFIXES):
+        raise BSFError(f"labels file {path}: use a .json, .txt, .npy or .seg file name")
     if suffix == ".npy":
         with atomic_path(path) as tmp, open(tmp, "wb") as fh:  # a handle: np.save adds no suffix
             np.save(fh, lab.astype(np.int64))
         return
-    if suffix == ".txt":
+    if suffix != ".json":  # one integer per line
         write_text_atomic(path, "".join(f"{v}\n" for v in lab.tolist()))
         return
     write_text_atomic(path, _json_text(lab, names))

@@ -17,10 +17,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph
 
-from ._files import atomic_path
-from ._errors import BSFError, MeshError
+from ._errors import MeshError
 
-__all__ = ["Mesh", "MeshError", "MeshReport", "load_mesh", "save_mesh", "mesh_edges", "edge_graph",
+__all__ = ["Mesh", "MeshError", "MeshReport", "load_mesh", "mesh_edges", "edge_graph",
            "graph_from_edges", "mesh_report", "n_components"]
 
 
@@ -546,55 +545,3 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     if faces.shape[0] == 0:
         raise MeshError(f"{p}: mesh has no faces (only triangle/polygon meshes are supported)")
     return clean_mesh(pts, faces, name=str(p))
-
-
-def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = None, *,
-              immediate: bool = False) -> None:
-    """Write ``mesh`` (and optional per-vertex arrays) atomically; format from the extension.
-
-    ``point_data`` maps names to arrays of length ``n_vertices`` (e.g. a transferred
-    segmentation or an error map).  PLY keeps them as vertex properties that MeshLab shows;
-    ``red``/``green``/``blue`` uint8 arrays become vertex colours.  ``immediate``: as
-    :func:`bsfjax._files.atomic_path` (in place at once, even inside an output transaction).
-    """
-    import meshio
-
-    if not isinstance(mesh, Mesh):
-        raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
-    import contextlib
-    import io
-
-    from meshio._helpers import _filetypes_from_path  # format lookup by extension
-
-    dest = Path(path)
-    try:
-        _filetypes_from_path(dest)
-    except Exception as exc:
-        raise MeshError(f"{dest}: cannot write mesh (unknown format {dest.suffix!r}; use .ply, "
-                        ".off, .obj, .stl, ...)") from exc
-    small_ints = dest.suffix.lower() == ".ply"  # PLY has no 64-bit integers
-    data = {}
-    for key, val in (point_data or {}).items():
-        arr = np.asarray(val)
-        if arr.shape[:1] != (mesh.n_vertices,):
-            raise MeshError(
-                f"point_data[{key!r}] has {arr.shape[0] if arr.ndim else 'no'} rows, "
-                f"mesh has {mesh.n_vertices} vertices"
-            )
-        if small_ints and arr.dtype == np.int64:
-            arr = arr.astype(np.int32)
-        if arr.dtype == np.bool_:
-            arr = arr.astype(np.uint8)
-        data[key] = arr
-    faces = np.asarray(mesh.faces, dtype=np.int32 if small_ints else np.int64)
-    out = meshio.Mesh(np.asarray(mesh.vertices), [("triangle", faces)], point_data=data)
-    try:
-        with atomic_path(dest, immediate=immediate) as tmp, \
-                contextlib.redirect_stdout(io.StringIO()):
-            meshio.write(tmp, out)  # the temp name keeps the extension meshio reads
-    except MeshError:
-        raise
-    except BSFError as exc:  # an OSError, already worded with the user's path
-        raise MeshError(str(exc)) from None
-    except (meshio.WriteError, ValueError, KeyError) as exc:
-        raise MeshError(f"{dest}: cannot write mesh ({exc})") from exc

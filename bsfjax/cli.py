@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ._cli_io import (CLIError, _read_array, _write_array, coloured_point_data, is_json,
                       read_truth, read_values)
+from ._label_files import is_face_file
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -47,11 +48,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("target", nargs="+", help="target mesh; with --out-dir any number of files, "
                                              "folders (their mesh files) or glob patterns")
     what = p.add_mutually_exclusive_group(required=True)
-    what.add_argument("--labels", help="one integer label per source vertex (.txt or .npy), or "
-                      "parts as SMPL's .json {part name: [vertex indices]}")
+    what.add_argument("--labels", help="one integer label per source vertex (.txt or .npy), "
+                      "parts as SMPL's .json {part name: [vertex indices]}, or one label per "
+                      "triangle (.seg as PSB / COSEG, or .txt / .npy of that length)")
     what.add_argument("--function", help="per-source-vertex values: (n,) or (n, m) (.txt or .npy)")
     p.add_argument("--out", help="per-target-vertex labels/values (.txt or .npy; labels also .json "
-                                 "{part name: [vertex indices]}), one target")
+                                 "{part name: [vertex indices]}; labels of triangles also .seg), "
+                                 "one target")
     p.add_argument("--out-dir", help="many targets: write DIR/<target name>.txt and "
                                      "DIR/summary.json; complete outputs are skipped on a rerun")
     p.add_argument("--map", nargs="+", default=["estimate"], metavar="KIND [FILE]",
@@ -74,9 +77,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mesh-out-dir", help="--out-dir: also write DIR/<target name>.ply coloured")
     p.add_argument("--threshold", type=float, default=None,
                    help="labels: a target vertex whose best score is below this is unassigned (-1) "
-                        "(default 0.5; 0 for 'refined', whose scores are vote shares)")
-    p.add_argument("--truth", help="labels: ground-truth label per target vertex (.txt, .npy or "
-                                   ".json as --labels); report the share of the target's area "
+                        "(default 0.5; 0 for 'p2p' and 'refined', whose scores are shares)")
+    p.add_argument("--truth", help="labels: ground-truth label per target vertex (or triangle) in "
+                                   "a file as --labels; report the share of the target's area "
                                    "labelled correctly")
     p.add_argument("--truth-dir", help="--out-dir: folder of <target name>.txt/.npy ground "
                                        "truths; summary.json reports each accuracy")
@@ -187,11 +190,14 @@ def _transfer_one(args) -> int:
     import numpy as np
 
     from ._highlevel import estimate_map, transfer_labels, transfer_values
-    from ._mesh import load_mesh, save_mesh
+    from ._mesh import load_mesh
+    from ._mesh_write import save_mesh
     from ._spectrum import spectrum
 
-    if Path(args.out).suffix not in (".npy", ".txt") and not (args.labels and is_json(args.out)):
-        raise CLIError(f"--out {args.out}: use a .txt or .npy file name (labels: also .json)")
+    if Path(args.out).suffix not in (".npy", ".txt") and not (
+            args.labels and (is_json(args.out) or is_face_file(args.out))):
+        raise CLIError(f"--out {args.out}: use a .txt or .npy file name (labels: also .json or "
+                       ".seg)")
     if args.truth and not args.labels:
         raise CLIError("--truth compares labels: use it with --labels")
     if args.mesh_out and Path(args.mesh_out).suffix.lower() != ".ply":
@@ -206,13 +212,17 @@ def _transfer_one(args) -> int:
 
         check_indices(landmarks[0], "--landmarks (source)", source.n_vertices)
         check_indices(landmarks[1], "--landmarks (target)", target.n_vertices)
-    values, names = read_values(args, source.n_vertices)
+    values, names, per_face = read_values(args, source)
+    if args.labels and (is_json(args.out) if per_face else is_face_file(args.out)):
+        kinds = "triangle: write .seg," if per_face else "vertex: write .json,"
+        raise CLIError(f"--out {args.out}: the labels are per {kinds} .txt or .npy")
     truth = None
     if args.truth:
         truth = read_truth(args.truth, names)
-        if truth.shape != (target.n_vertices,):
-            raise CLIError(f"truth file {args.truth}: expected one label per target vertex "
-                           f"({target.n_vertices}), got shape {truth.shape}")
+        where, n = ("triangle", target.n_faces) if per_face else ("vertex", target.n_vertices)
+        if truth.shape != (n,):
+            raise CLIError(f"truth file {args.truth}: expected one label per target {where} "
+                           f"({n}), got shape {truth.shape}")
     k = args.k
     kmax = min(source.n_vertices, target.n_vertices) - 1
     if not 1 <= k <= kmax:
@@ -273,10 +283,18 @@ def _transfer_one(args) -> int:
         common["samples"] = (est.samples if kind == "estimate" else
                              (subsample(source, ZOOMOUT_SAMPLES),
                               subsample(target, ZOOMOUT_SAMPLES)))
-    if args.labels:
+    if args.labels and per_face:
+        from ._face_labels import transfer_face_labels
+
+        del common["mesh"]
+        res = transfer_face_labels(sm, sn, values, source_mesh=source, target_mesh=target,
+                                   threshold=args.threshold, **common)
+    elif args.labels:
         res = transfer_labels(sm, sn, values, threshold=args.threshold, **common)
+    if args.labels:
         result = res.labels.astype(np.int64)
-        print(f"transferred {np.unique(values).size} labels with {args.method}; unassigned: "
+        print(f"transferred {np.unique(values).size} labels "
+              f"{'of triangles ' if per_face else ''}with {args.method}; unassigned: "
               f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
         if res.regime is not None:
             why = [] if res.agreement is None else [f"{res.agreement:.1%} of the area as the "
@@ -286,15 +304,18 @@ def _transfer_one(args) -> int:
             print(f"regime: {res.regime}" + (f" ({', '.join(why)})" if why else ""),
                   file=sys.stderr)
         if truth is not None:
-            area = np.asarray(sn.mass)
+            area = target.face_areas() if per_face else np.asarray(sn.mass)
             correct = result == truth
             print(f"accuracy against {args.truth}: {np.sum(area * correct) / np.sum(area):.1%} of "
-                  f"the target area ({np.mean(correct):.1%} of its vertices)", file=sys.stderr)
+                  f"the target area ({np.mean(correct):.1%} of its "
+                  f"{'triangles' if per_face else 'vertices'})", file=sys.stderr)
     else:
         result = transfer_values(sm, sn, values, **common)
         result = result.T if result.ndim == 2 else result
     if args.mesh_out:
-        save_mesh(args.mesh_out, target, point_data=coloured_point_data(result, bool(args.labels)))
+        coloured = coloured_point_data(result, bool(args.labels))
+        save_mesh(args.mesh_out, target, **({"cell_data": coloured} if per_face
+                                             else {"point_data": coloured}))
     _write_array(args.out, result, names)
     print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else ""), file=sys.stderr)
     return 0
@@ -304,7 +325,7 @@ def _cmd_example(args) -> int:
     from ._files import write_text_atomic
     from ._demo import example_landmarks
     from ._example import example_pair
-    from ._mesh import save_mesh
+    from ._mesh_write import save_mesh
 
     if not 1 <= args.levels <= 4:
         raise CLIError(f"--levels must be in [1, 4], got {args.levels}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -134,6 +135,58 @@ def test_transfer_command_smpl_json_labels_in_and_out(cli_files, tmp_path, capsy
                  str(tmp_path / "parts.json"), "--map", "p2p", str(d / "identity.npy"), "-k",
                  "20", "--truth", str(tmp_path / "odd.json"), "--out", str(out)]) == 2
     assert "parts ['other'] are not parts of the labels file" in capsys.readouterr().err
+
+
+def _triangle_labels(mesh, vertex_labels):
+    """Each triangle's label: the majority of its corners' (the first corner's if all differ)."""
+    a, b, c = np.asarray(vertex_labels)[mesh.faces].T
+    return np.where((b == c) & (a != b), b, a)
+
+
+def test_transfer_command_labels_per_triangle(cli_files, tmp_path, capsys):
+    """A .seg file (one label per triangle, as PSB / COSEG) goes in and comes out per
+    triangle, as the library's transfer_face_labels gives it, with face colours in the PLY; a
+    .txt of that length is read the same way; the wrong lengths and suffixes are named."""
+    d, pair = cli_files
+    labels = _triangle_labels(pair.source, pair.labels)
+    truth = _triangle_labels(pair.target, pair.labels[np.asarray(pair.p2p)])
+    np.savetxt(tmp_path / "parts.seg", labels, fmt="%d")
+    np.savetxt(tmp_path / "parts.txt", labels, fmt="%d")
+    np.savetxt(tmp_path / "truth.seg", truth, fmt="%d")
+    base = ["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--map", "p2p",
+            str(d / "identity.npy"), "-k", "20"]
+    out, ply = tmp_path / "out.seg", tmp_path / "out.ply"
+    assert main([*base, "--labels", str(tmp_path / "parts.seg"), "--truth",
+                 str(tmp_path / "truth.seg"), "--out", str(out), "--mesh-out", str(ply)]) == 0
+    err = capsys.readouterr().err
+    assert "labels of triangles with p2p" in err and "of its triangles" in err
+    got = np.loadtxt(out, dtype=int)
+    sm, sn = bsfjax.spectrum(pair.source, 3), bsfjax.spectrum(pair.target, 3)
+    want = bsfjax.transfer_face_labels(sm, sn, labels, source_mesh=pair.source,
+                                       target_mesh=pair.target, method="p2p",
+                                       p2p=np.asarray(pair.p2p)).labels
+    np.testing.assert_array_equal(got, want)
+    assert np.mean(got == truth) > 0.99
+    import meshio
+
+    np.testing.assert_array_equal(meshio.read(ply).cell_data["label"][0], got)
+    assert main([*base, "--labels", str(tmp_path / "parts.txt"), "--out",
+                 str(tmp_path / "out.npy")]) == 0  # as many labels as triangles: per triangle
+    np.testing.assert_array_equal(np.load(tmp_path / "out.npy"), got)
+    for labels_file, out_file, match in (
+            ("parts.seg", "out.json", "the labels are per triangle"),
+            (str(d / "labels.txt"), "out.seg", "the labels are per vertex"),
+            (str(d / "short.txt"), "out.txt", r"source mesh has \d+ vertices and \d+ triangles")):
+        capsys.readouterr()
+        assert main([*base, "--labels", str(tmp_path / labels_file), "--out",
+                     str(tmp_path / out_file)]) == 2
+        assert re.search(match, capsys.readouterr().err)
+    (tmp_path / "short.seg").write_text("0\n1\n")
+    assert main([*base, "--labels", str(tmp_path / "short.seg"), "--out", str(out)]) == 2
+    assert "a .seg file has one label per triangle" in capsys.readouterr().err
+    assert main([*base, "--labels", str(tmp_path / "parts.seg"), "--truth",
+                 str(d / "labels.txt"), "--out", str(out)]) == 2
+    assert "expected one label per target triangle" in capsys.readouterr().err
 
 
 def test_transfer_command_function_with_estimated_map(cli_files):

@@ -245,3 +245,34 @@ def test_json_labels_come_back_as_json_per_target(files, one_process, tmp_path, 
     capsys.readouterr()
     assert main(argv) == 0
     assert "1 complete (skipped), 0 to run" in capsys.readouterr().err
+
+
+def test_labels_per_triangle_come_back_per_triangle(files, tmp_path, capsys):
+    """A .seg source: each target's triangles labelled (DIR/<stem>.seg), scored against a
+    .seg truth, as the one-target command labels them; a rerun skips them."""
+    small = bsfjax.example_pair(levels=1)
+    a, b, c = small.labels[small.source.faces].T
+    np.savetxt(tmp_path / "parts.seg", np.where((b == c) & (a != b), b, a), fmt="%d")
+    (tmp_path / "truth").mkdir()
+    t = small.labels[np.asarray(small.p2p)][small.target.faces].T
+    truth = np.where((t[1] == t[2]) & (t[0] != t[1]), t[1], t[0])
+    np.savetxt(tmp_path / "truth" / "t506.seg", truth, fmt="%d")
+    out = tmp_path / "out"
+    argv = _argv(files, out, files / "tg" / "t506.ply",
+                 extra=["--truth-dir", str(tmp_path / "truth"), "--mesh-out-dir",
+                        str(tmp_path / "ply")])
+    argv[argv.index(str(files / "labels.txt"))] = str(tmp_path / "parts.seg")
+    assert main(argv) == 0
+    got = np.loadtxt(out / "t506.seg", dtype=int)
+    assert got.shape == (small.target.n_faces,) and not (out / "t506.txt").exists()
+    row = json.loads((out / "summary.json").read_text())["targets"][0]
+    area = small.target.face_areas()
+    assert row["accuracy"] == pytest.approx(np.sum(area * (got == truth)) / area.sum())
+    assert row["accuracy"] > 0.8 and row["regime"] in REGIMES
+    import meshio
+
+    np.testing.assert_array_equal(meshio.read(tmp_path / "ply" / "t506.ply")
+                                  .cell_data["label"][0], got)
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert "1 complete (skipped), 0 to run" in capsys.readouterr().err

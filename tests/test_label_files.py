@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from bsfjax import BSFError, load_labels, save_labels
+from bsfjax import BSFError, is_face_file, load_labels, save_labels
 
 from .conftest import data_path
 
@@ -25,10 +25,12 @@ def test_json_first_name_wins_and_every_vertex_is_listed(tmp_path):
     np.savetxt(g, [0, 2, 1])
     lab, names = load_labels(g)
     np.testing.assert_array_equal(lab, [0, 2, 1])
-    assert names == ("0", "1", "2")
+    assert names is None  # integer labels are their own names
+    np.savetxt(g, [0, 10**12])
+    np.testing.assert_array_equal(load_labels(g).labels, [0, 10**12])  # no allocation by id
 
 
-@pytest.mark.parametrize("suffix", [".json", ".txt", ".npy"])
+@pytest.mark.parametrize("suffix", [".json", ".txt", ".npy", ".seg"])
 def test_save_then_load_round_trip(tmp_path, suffix):
     lab = np.random.default_rng(0).integers(0, 5, 300)
     lab[7] = 6  # label 5 has no vertex: its name is written all the same (.json)
@@ -42,6 +44,7 @@ def test_save_then_load_round_trip(tmp_path, suffix):
         np.testing.assert_array_equal(np.asarray(got_names)[got], np.asarray(names)[lab])
     else:
         np.testing.assert_array_equal(got, lab)
+    assert is_face_file(path) == (suffix == ".seg")  # one label per triangle, by the suffix
 
 
 def test_unassigned_vertices_are_listed_apart(tmp_path):
@@ -62,9 +65,20 @@ def test_bad_files_and_arguments_are_named(tmp_path):
         load_labels(bad)
     txt = tmp_path / "bad.txt"
     txt.write_text("0\n1.5\n")
-    with pytest.raises(BSFError, match="one non-negative integer label per vertex"):
+    with pytest.raises(BSFError, match=r"one non-negative integer label per vertex, found 1.5 "
+                                       r"\(entry 1\)"):
         load_labels(txt)
-    with pytest.raises(BSFError, match="use a .json, .txt or .npy"):
+    txt.write_text("0\n-2\n")
+    with pytest.raises(BSFError, match=r"found -2.0 \(entry 1\)"):
+        load_labels(txt)
+    txt.write_text("")
+    with pytest.raises(BSFError, match="per vertex, got no data"):
+        load_labels(txt)
+    txt.write_text("0\n1.5\n")
+    txt.rename(seg := tmp_path / "bad.seg")
+    with pytest.raises(BSFError, match="one non-negative integer label per triangle"):
+        load_labels(seg)
+    with pytest.raises(BSFError, match="use a .json, .txt, .npy or .seg"):
         save_labels(tmp_path / "x.csv", np.zeros(3, int))
     with pytest.raises(BSFError, match="3 or more distinct part names"):
         save_labels(tmp_path / "x.json", np.array([0, 1, 2]), ("a", "b"))

@@ -218,6 +218,38 @@ def test_save_point_data_and_atomicity(tmp_path, sphere_mesh):
     assert sorted(q.name for q in tmp_path.iterdir()) == ["out.ply"]
 
 
+def test_save_triangle_data_to_ply(tmp_path, sphere_mesh):
+    """Per-triangle arrays (a segmentation of the triangles and its colours) go to PLY face
+    properties that meshio and load_mesh read back; other formats and wrong lengths are named
+    errors that leave nothing behind."""
+    p = tmp_path / "faces.ply"
+    m = sphere_mesh.n_faces
+    label = np.arange(m) % 7
+    rgb = np.stack([label * 30, 255 - label * 30, np.full(m, 9)], axis=1).astype(np.uint8)
+    err = np.linspace(0, 1, sphere_mesh.n_vertices)
+    save_mesh(p, sphere_mesh, point_data={"error": err},
+              cell_data={"label": label, "red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2],
+                         "normal": np.ones((m, 3))})
+    import meshio
+
+    back = meshio.read(p)
+    np.testing.assert_array_equal(back.cells[0].data, sphere_mesh.faces)
+    np.testing.assert_array_equal(back.points, sphere_mesh.vertices)  # exact: 17 digits
+    np.testing.assert_array_equal(back.point_data["error"], err)
+    np.testing.assert_array_equal(back.cell_data["label"][0], label)
+    np.testing.assert_array_equal(back.cell_data["green"][0], rgb[:, 1])
+    np.testing.assert_array_equal(back.cell_data["normal_2"][0], np.ones(m))
+    assert back.cell_data["red"][0].dtype == np.uint8
+    assert load_mesh(p).n_faces == m
+    with pytest.raises(MeshError, match=r"cell_data\['label'\] has 3 rows, mesh has \d+ triangles"):
+        save_mesh(tmp_path / "short.ply", sphere_mesh, cell_data={"label": label[:3]})
+    with pytest.raises(MeshError, match=".ply files only"):
+        save_mesh(tmp_path / "faces.off", sphere_mesh, cell_data={"label": label})
+    with pytest.raises(MeshError, match="no property type"):
+        save_mesh(tmp_path / "c.ply", sphere_mesh, cell_data={"z": label.astype(complex)})
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["faces.ply"]
+
+
 def test_public_names():
     for name in ["Mesh", "MeshError", "load_mesh", "save_mesh", "laplacian", "Spectrum", "spectrum",
                  "spectrum_from_operators", "interval_spectrum"]:
