@@ -197,10 +197,11 @@ def cmd_transfer_many(args, error) -> int:
             continue
         rec = {"target": str(path), "status": "ok", "vertices": res.n_vertices,
                "map_energy": res.map_energy, "seconds": round(res.seconds, 4)}
+        # the target's triangles: read once, for the face labels and the coloured mesh
+        target = load_mesh(path) if per_face or mesh_dir is not None else None
         if labels:
             mass, n = res.mass, res.n_vertices
             if per_face:
-                target = load_mesh(path)
                 mass, n = target.face_areas(), target.n_faces
                 res = decide_face_labels(target, shares, res.values, res.p2p, threshold, refined)
             rec.update(unassigned_share=res.unassigned_share, regime=res.regime,
@@ -215,7 +216,7 @@ def cmd_transfer_many(args, error) -> int:
             from ._cli_io import coloured_point_data
 
             coloured = coloured_point_data(result, labels)
-            save_mesh(mesh_dir / f"{path.stem}.ply", load_mesh(path), immediate=True,
+            save_mesh(mesh_dir / f"{path.stem}.ply", target, immediate=True,
                       **({"cell_data": coloured} if per_face else {"point_data": coloured}))
         if part_names is not None:
             write_text_atomic(out_dir / f"{path.stem}.json", _json_text(result, part_names),
