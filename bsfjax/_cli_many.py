@@ -154,12 +154,6 @@ def cmd_transfer_many(args, error) -> int:
     values, part_names, per_face = read_values(args, source)
     # .json labels come back as .json, triangles' labels as .seg
     suffix = ".seg" if per_face else ".txt" if part_names is None else ".json"
-    if per_face:  # each label's share of the vertices' stars goes across as a function
-        from ._face_labels import decide_face_labels, face_label_shares
-        from ._highlevel import _split_label_kwargs
-
-        shares = face_label_shares(source, values)
-        _, _, threshold, refined = _split_label_kwargs(args.method, args.threshold, {})
     out_dir.mkdir(parents=True, exist_ok=True)
     multi = jax.process_count() > 1
     if jax.process_index() == 0:  # before the first barrier: no process is writing yet
@@ -178,8 +172,8 @@ def cmd_transfer_many(args, error) -> int:
     failed = 0
     labels = args.labels is not None
     results = transfer_collection(
-        source, shares.shares if per_face else values, [targets[i] for i in todo],
-        labels=labels and not per_face, method=args.method, k=args.k,
+        source, values, [targets[i] for i in todo], labels=labels, faces=per_face,
+        method=args.method, k=args.k,
         landmarks=lambda j: landmarks.get(todo[j]), threshold=args.threshold,
         errors="report", spectrum_cache=args.spectrum_cache,
         batch=1 if args.batch is None else args.batch, starts=one_start(args, args.k))
@@ -203,7 +197,6 @@ def cmd_transfer_many(args, error) -> int:
             mass, n = res.mass, res.n_vertices
             if per_face:
                 mass, n = target.face_areas(), target.n_faces
-                res = decide_face_labels(target, shares, res.values, res.p2p, threshold, refined)
             rec.update(unassigned_share=res.unassigned_share, regime=res.regime,
                        confidence=res.confidence, agreement=res.agreement)
             truth = _truth(args.truth_dir, path.stem, n, part_names, error, per_face)

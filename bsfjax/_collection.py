@@ -53,6 +53,7 @@ from ._orientation import _geometry
 from ._fmap import _default_chunk
 from ._highlevel import LANDMARK_FREE_STARTS, WKS_VARIANCE, ZOOMOUT_SAMPLES, _check_landmarks, \
     _check_starts, _decide_labels, default_threshold, estimate_map, mirror_symmetry
+from ._face_labels import decide_face_labels, face_label_shares
 from ._indicators import labels_to_indicators
 from ._mesh import Mesh, load_mesh
 from ._methods import BSF, GeodesicBalls, RefinedPullBack, SaturatedHeat, as_method, \
@@ -207,8 +208,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                         n_energies: int = 100, n_bsf: float | int = 0.05, seed: int = 0,
                         zoomout_samples: int | None = ZOOMOUT_SAMPLES,
                         spectrum_cache: str | None = None,
-                        errors: str = "raise", batch: int = 1,
-                        starts=None) -> Iterator[tuple[int, TargetTransfer | Exception]]:
+                        errors: str = "raise", batch: int = 1, starts=None,
+                        faces: bool = False) -> Iterator[tuple[int, TargetTransfer | Exception]]:
     """Transfer one segmentation (or functions) from ``source`` to every mesh of ``targets``.
 
     Yields ``(index, result)`` as batches finish (grouped by size bucket, so not in order);
@@ -221,6 +222,11 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     - ``source``: the source :class:`~bsfjax.Mesh` or its file.
     - ``values``: ``(n_M,)`` int labels (``labels=True``) or ``(m, n_M)`` functions.
+    - ``faces``: ``values`` are ``(m_M,)`` labels of the source's triangles, carried as
+      :func:`bsfjax.transfer_face_labels` does (each label's share of the vertices' stars);
+      each result's ``labels`` are then per target triangle, its ``unassigned_share``,
+      ``agreement`` and ``confidence`` weighted by triangle area, its ``values`` the
+      transferred shares at the vertices.
     - ``targets``: meshes or mesh files (loaded one at a time; a collection may be larger than
       memory).
     - ``method``: as :func:`bsfjax.transfer_labels` (default ``"refined"``; the spectra then
@@ -265,7 +271,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     source = _as_mesh(source)
     n_m = source.n_vertices
     vals = np.asarray(values)
-    if labels:
+    if faces:
+        if not labels:
+            raise BSFError("faces=True carries labels of triangles: labels must be True")
+        shares = face_label_shares(source, vals)
+        ids, F = shares.ids, shares.shares
+    elif labels:
         if vals.shape != (n_m,):
             raise BSFError(f"labels must have one entry per source vertex ({n_m}), got shape "
                            f"{vals.shape}")
@@ -280,6 +291,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     refined = isinstance(method, RefinedPullBack)
     if threshold is None:
         threshold = default_threshold(method)
+    if not 0 <= threshold < 1:
+        raise BSFError(f"threshold must be in [0, 1), got {threshold!r}")
     k_map = 2 * k
     k_spec = max(k_map, REFINE_EIGENPAIRS) if getattr(method, "full_spectra", False) else k_map
     if k_spec >= n_m:
@@ -387,7 +400,10 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             mass = np.asarray(tg.spectrum.mass, np.float64)
             lab = agree = conf = regime = None
             share_un = 0.0
-            if labels:
+            if faces:
+                lab, _, share_un, agree, conf, regime = decide_face_labels(
+                    tg.mesh, shares, vals_j, p2p, threshold, refined)
+            elif labels:
                 lab, _, share_un, agree, conf, regime = _decide_labels(
                     ids, vals_j, mass, threshold, refined, vals[p2p])
             yield tg.index, TargetTransfer(

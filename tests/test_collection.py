@@ -128,6 +128,34 @@ def test_padded_targets_equal_the_one_pair_path(collection):
     assert np.sum(mass * (padded[0].labels == truth)) / mass.sum() > 0.9
 
 
+def test_labels_of_triangles_equal_the_one_pair_path(collection):
+    """faces=True: each target's triangles labelled as estimate_map then transfer_face_labels
+    label them (padded targets: the padding adds no triangle)."""
+    small, targets, lm, _ = collection
+    a, b, c = small.labels[small.source.faces].T
+    faces = np.where((b == c) & (a != b), b, a)
+    got = dict(transfer_collection(small.source, faces, targets, method="refined", k=10,
+                                   landmarks=lambda i: lm.get(i), zoomout_samples=300,
+                                   faces=True))
+    sm = bsfjax.spectrum(small.source, 100)
+    for i, t in enumerate(targets):
+        sn = bsfjax.spectrum(t, 100)
+        est = bsfjax.estimate_map(sm.truncate(20), sn.truncate(20), k=10, refine_to=20,
+                                  landmarks=lm.get(i), source_mesh=small.source, target_mesh=t,
+                                  zoomout_samples=300)
+        res = bsfjax.transfer_face_labels(sm, sn, faces, source_mesh=small.source,
+                                          target_mesh=t, C=est.C, p2p=est.p2p,
+                                          samples=est.samples)
+        assert got[i].labels.shape == (t.n_faces,)
+        np.testing.assert_array_equal(got[i].labels, res.labels)
+        assert got[i].regime == res.regime
+        assert got[i].agreement == pytest.approx(res.agreement, abs=1e-6)
+    with pytest.raises(BSFError, match="one entry per face"):
+        list(transfer_collection(small.source, small.labels, targets, faces=True))
+    with pytest.raises(BSFError, match="labels must be True"):
+        list(transfer_collection(small.source, faces, targets, faces=True, labels=False))
+
+
 def test_one_start_runs_targets_without_landmarks_through_the_batched_stages(collection):
     """``starts=((k, WKS_VARIANCE),)``: a target without landmarks gets the single start's
     map from the padded stages, equal to estimate_map with that start (and not the default's
@@ -229,6 +257,7 @@ def test_errors_are_reported_per_target_or_raised(tmp_path):
     (dict(method="std2"), "std2"),
     (dict(k=1), "k"),
     (dict(errors="ignore"), "errors"),
+    (dict(threshold=1.5), r"threshold must be in \[0, 1\)"),
 ])
 def test_bad_options(kwargs, match):
     small = bsfjax.example_pair(levels=1)
