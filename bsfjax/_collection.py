@@ -84,7 +84,8 @@ class TargetTransfer(NamedTuple):
     map_energy: float  #: the estimation energy E(C) of :func:`bsfjax.estimate_fmap` at ``C``
     unassigned_share: float  #: area share of the target left unassigned (labels)
     agreement: float | None  #: area share equal to the pull-back through ``p2p`` (labels)
-    confidence: float | None  #: area-weighted mean winning score (labels)
+    #: area-weighted mean winning score (labels; ``None`` for labels of triangles)
+    confidence: float | None
     regime: str | None  #: ``"refined"`` only: see :data:`bsfjax.REGIMES`
     n_vertices: int
     mass: np.ndarray  #: ``(n_N,)`` vertex areas of the target (relative: for area shares)
@@ -224,8 +225,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     - ``values``: ``(n_M,)`` int labels (``labels=True``) or ``(m, n_M)`` functions.
     - ``faces``: ``values`` are ``(m_M,)`` labels of the source's triangles, carried as
       :func:`bsfjax.transfer_face_labels` does (each label's share of the vertices' stars);
-      each result's ``labels`` are then per target triangle, its ``unassigned_share``,
-      ``agreement`` and ``confidence`` weighted by triangle area, its ``values`` the
+      each result's ``labels`` are then per target triangle, its ``unassigned_share`` and
+      ``agreement`` weighted by triangle area (``confidence`` ``None``), its ``values`` the
       transferred shares at the vertices.
     - ``targets``: meshes or mesh files (loaded one at a time; a collection may be larger than
       memory).

@@ -116,8 +116,10 @@ def transfer_face_labels(source: Spectrum, target: Spectrum, face_labels: Int[Ar
 
     **Returns:** :class:`bsfjax.LabelTransfer` over the *target's faces*: ``labels`` ``(m_N,)``
     (−1 unassigned), ``scores`` ``(L, m_N)``, and the area shares (``unassigned_share``,
-    ``agreement`` with the input point map's pull-back of the same shares, ``confidence``)
-    weighted by triangle area.
+    ``agreement`` with the input point map's pull-back of the same shares) weighted by
+    triangle area.  ``confidence`` is ``None``: a triangle's scores are area shares, below 1
+    at every border whatever the map, so they say nothing of how sure the transfer is, and
+    the regime of ``"refined"`` comes from the agreement alone.
     """
     for mesh, spec, what in ((source_mesh, source, "source"), (target_mesh, target, "target")):
         if not isinstance(mesh, Mesh):
@@ -145,4 +147,4 @@ def decide_face_labels(target_mesh: Mesh, shares: FaceShares, moved, p2p, thresh
     reference = None if p2p is None else \
         shares.ids[face_scores(target_mesh, shares.shares[:, np.asarray(p2p)]).argmax(axis=0)]
     return _decide_labels(shares.ids, scores, target_mesh.face_areas(), threshold, refined,
-                          reference)
+                          reference, votes=False)

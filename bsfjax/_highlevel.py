@@ -462,7 +462,8 @@ class LabelTransfer(NamedTuple):
     #: map (``None`` without ``p2p``)
     agreement: float | None = None
     #: area-weighted mean of the winning score (for ``"refined"``: the share of its maps that
-    #: vote for the label it gives)
+    #: vote for the label it gives); ``None`` for labels of triangles, whose scores are area
+    #: shares of a neighbourhood, below 1 at every border, not votes
     confidence: float | None = None
     #: ``"refined"`` only: how much the refinement changed the input map's labels — see
     #: :data:`REGIMES`; ``None`` for the other methods
@@ -478,8 +479,8 @@ class LabelTransfer(NamedTuple):
 REGIMES = ("kept", "refined", "corrected", "unreliable")
 
 
-def _regime(agreement: float | None, confidence: float) -> str:
-    if confidence < 0.8:
+def _regime(agreement: float | None, confidence: float | None) -> str:
+    if confidence is not None and confidence < 0.8:
         return "unreliable"
     if agreement is None:  # no input point map to compare with
         return "refined"
@@ -549,11 +550,12 @@ def default_threshold(method: AbstractMethod) -> float:
     return 0.0 if isinstance(method, (PullBack, RefinedPullBack)) else 0.5
 
 
-def _decide_labels(ids, scores, weights, threshold: float, refined: bool,
-                   reference) -> LabelTransfer:
+def _decide_labels(ids, scores, weights, threshold: float, refined: bool, reference,
+                   votes: bool = True) -> LabelTransfer:
     """The :class:`LabelTransfer` of label ``scores`` ``(L, m)`` (row ``i``: label ``ids[i]``)
     on ``m`` elements of areas ``weights``: the arg-max, −1 below ``threshold``; ``reference``:
-    the labels of the input map's pull-back (``None``: no input point map)."""
+    the labels of the input map's pull-back (``None``: no input point map); ``votes``: the
+    scores are indicators' transfers, whose winning value is a confidence (else ``None``)."""
     scores = np.asarray(scores)
     best = scores.max(axis=0)
     out = np.where(best < threshold, -1, ids[scores.argmax(axis=0)].astype(np.int64))
@@ -561,7 +563,7 @@ def _decide_labels(ids, scores, weights, threshold: float, refined: bool,
     share = float(np.sum(weights * (out < 0)) / total)
     agreement = (None if reference is None else
                  float(np.sum(weights * (np.asarray(reference) == out)) / total))
-    confidence = float(np.sum(weights * best) / total)
+    confidence = float(np.sum(weights * best) / total) if votes else None
     return LabelTransfer(labels=out, scores=scores, unassigned_share=share, agreement=agreement,
                          confidence=confidence,
                          regime=_regime(agreement, confidence) if refined else None)

@@ -299,7 +299,7 @@ def _transfer_one(args) -> int:
         if res.regime is not None:
             why = [] if res.agreement is None else [f"{res.agreement:.1%} of the area as the "
                                                     "input map's pull-back"]
-            if res.confidence < 1:  # a vote of several maps (n_vote > 1)
+            if res.confidence is not None and res.confidence < 1:  # a vote (n_vote > 1)
                 why.append(f"vote confidence {res.confidence:.2f}")
             print(f"regime: {res.regime}" + (f" ({', '.join(why)})" if why else ""),
                   file=sys.stderr)

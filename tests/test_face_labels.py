@@ -101,7 +101,20 @@ def test_refined_votes_and_reports_its_regime(spheres):
     assert res.labels.shape == (target.n_faces,) and res.regime in REGIMES
     area = target.face_areas()
     assert np.sum(area * (res.labels == labels)) / area.sum() > 0.9
-    assert 0 < res.confidence <= 1
+    assert res.confidence is None  # the scores are area shares, not votes
+
+
+def test_a_fine_segmentation_is_not_called_unreliable(spheres):
+    """With many small parts almost every triangle is at a border, so its winning share is
+    far below 1 whatever the map: the regime comes from the agreement, not from the scores."""
+    source, _, sm, _ = spheres
+    labels = np.arange(source.n_faces) // 4  # 80 parts of about 4 triangles
+    res = transfer_face_labels(sm, sm, labels, source_mesh=source, target_mesh=source,
+                               method="refined", p2p=np.arange(source.n_vertices),
+                               k_start=6, k_max=12, step=3)
+    area = source.face_areas()
+    assert np.sum(area * res.scores.max(axis=0)) / area.sum() < 0.8  # a vote would say so
+    assert res.regime != "unreliable" and res.confidence is None
 
 
 def test_bad_input_is_named(spheres):
