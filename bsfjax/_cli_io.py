@@ -44,16 +44,16 @@ def _read_array(path: str, what: str, dtype=None):
 
 
 def _write_array(path: str, arr, names=None) -> None:
-    """``arr`` to ``path`` (``.txt`` / ``.npy``; labels also ``.json``, with their part
-    ``names``, and ``.seg``), atomically."""
+    """``arr`` to ``path``, atomically: labels (1-D integers) by :func:`bsfjax.save_labels`
+    (``.txt``, ``.npy``, ``.json`` with their part ``names``, ``.seg``), functions as ``.txt``
+    or ``.npy``."""
     import numpy as np
 
     from ._files import atomic_path
+    from ._label_files import save_labels
 
     p = Path(path)
-    from ._label_files import is_face_file, save_labels
-
-    if (is_json(p) or is_face_file(p)) and np.issubdtype(arr.dtype, np.integer):
+    if arr.ndim == 1 and np.issubdtype(arr.dtype, np.integer):
         return save_labels(p, arr, names)
     if p.suffix not in (".npy", ".txt"):
         raise CLIError(f"--out {p}: use a .txt or .npy file name (labels: also .json or .seg)")
@@ -62,7 +62,7 @@ def _write_array(path: str, arr, names=None) -> None:
             with open(tmp, "wb") as fh:
                 np.save(fh, arr)
         else:
-            np.savetxt(tmp, arr, fmt="%d" if np.issubdtype(arr.dtype, np.integer) else "%.8g")
+            np.savetxt(tmp, arr, fmt="%.8g")
 
 
 def is_json(path) -> bool:

@@ -124,16 +124,16 @@ def test_corrupt_spectrum_cache_is_recomputed(tmp_path, mesh, corruption):
     _only(tmp_path, [path.name])
 
 
-@pytest.mark.parametrize("suffix", [".txt", ".npy"])
-def test_cli_output_interrupted(tmp_path, monkeypatch, suffix):
+@pytest.mark.parametrize("suffix, dtype", [(".txt", float), (".npy", float), (".npy", int)])
+def test_cli_output_interrupted(tmp_path, monkeypatch, suffix, dtype):
     from bsfjax import cli
 
     p = tmp_path / f"out{suffix}"
-    cli._write_array(str(p), np.arange(5))
+    cli._write_array(str(p), np.arange(5, dtype=dtype))  # a function, or labels (save_labels)
     before = p.read_bytes()
     monkeypatch.setattr(np, "savetxt" if suffix == ".txt" else "save", _partial_then_raise())
     with pytest.raises(Interrupted):
-        cli._write_array(str(p), np.arange(7))
+        cli._write_array(str(p), np.arange(7, dtype=dtype))
     assert p.read_bytes() == before
     _only(tmp_path, [p.name])
 
