@@ -45,20 +45,6 @@ class FaceShares(NamedTuple):
     shares: np.ndarray  # (L, n) share of label ids[i] in each vertex's star; columns sum to 1
 
 
-def _check_face_labels(mesh: Mesh, face_labels, what: str) -> np.ndarray:
-    lab = np.asarray(face_labels)
-    if lab.shape != (mesh.n_faces,):
-        raise BSFError(f"{what} must have one entry per face of the mesh ({mesh.n_faces}), got "
-                       f"shape {lab.shape}")
-    if not np.issubdtype(lab.dtype, np.integer):
-        if not (np.issubdtype(lab.dtype, np.floating) and np.all(np.isfinite(lab))
-                and np.all(np.mod(lab, 1) == 0)):
-            raise BSFError(f"{what} must be integers, got dtype {lab.dtype}")
-    if lab.size and lab.min() < 0:
-        raise BSFError(f"{what} must be >= 0, got {lab.min()}")
-    return lab.astype(np.int64)
-
-
 def face_label_shares(mesh: Mesh, face_labels: Int[ArrayLike, " m"]) -> FaceShares:
     r"""Each label's share of every vertex's star: the vertex functions that carry a face
     labelling (module doc, :math:`s_l(v)`).
@@ -74,7 +60,11 @@ def face_label_shares(mesh: Mesh, face_labels: Int[ArrayLike, " m"]) -> FaceShar
     """
     if not isinstance(mesh, Mesh):
         raise BSFError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
-    ids, codes = compact_labels(_check_face_labels(mesh, face_labels, "face_labels"))
+    lab = np.asarray(face_labels)
+    if lab.shape != (mesh.n_faces,):
+        raise BSFError(f"face_labels must have one entry per face of the mesh ({mesh.n_faces}), "
+                       f"got shape {lab.shape}")
+    ids, codes = compact_labels(lab, "face_labels")  # integers >= 0, as transfer_labels's
     area = mesh.face_areas()
     n = mesh.n_vertices
     corners = mesh.faces.ravel()
