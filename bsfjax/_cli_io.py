@@ -120,8 +120,8 @@ def read_values(args, source):
     return values, names, per_face
 
 
-def coloured_point_data(result, labels: bool) -> dict:
-    """PLY vertex properties of a transfer: the result and its colours."""
+def coloured_data(result, labels: bool) -> dict:
+    """PLY properties of a transfer, per vertex or per triangle: the result and its colours."""
     import numpy as np
 
     if labels:

@@ -206,9 +206,9 @@ def cmd_transfer_many(args, error) -> int:
         else:
             result = res.values.T if res.values.shape[0] > 1 else res.values[0]
         if mesh_dir is not None:
-            from ._cli_io import coloured_point_data
+            from ._cli_io import coloured_data
 
-            coloured = coloured_point_data(result, labels)
+            coloured = coloured_data(result, labels)
             save_mesh(mesh_dir / f"{path.stem}.ply", target, immediate=True,
                       **({"cell_data": coloured} if per_face else {"point_data": coloured}))
         if part_names is not None:

@@ -11,7 +11,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from ._cli_io import (CLIError, _read_array, _write_array, coloured_point_data, is_json,
+from ._cli_io import (CLIError, _read_array, _write_array, coloured_data, is_json,
                       read_truth, read_values)
 from ._label_files import is_face_file
 
@@ -313,7 +313,7 @@ def _transfer_one(args) -> int:
         result = transfer_values(sm, sn, values, **common)
         result = result.T if result.ndim == 2 else result
     if args.mesh_out:
-        coloured = coloured_point_data(result, bool(args.labels))
+        coloured = coloured_data(result, bool(args.labels))
         save_mesh(args.mesh_out, target, **({"cell_data": coloured} if per_face
                                              else {"point_data": coloured}))
     _write_array(args.out, result, names)
