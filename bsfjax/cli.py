@@ -71,8 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", default=None,
                    help="transfer method: refined (default: pull-back through the refined map; "
                         "with '--map p2p FILE' the default is p2p, the given map as it is), p2p "
-                        "(pull-back), omp, omp_error, lstsq, lasso (the paper's BSF coders), std, "
-                        "prod, geod, heat")
+                        "(pull-back; also for a '--map fmap FILE' that is already accurate), "
+                        "omp, omp_error, lstsq, lasso (the paper's BSF coders), std, prod, geod, "
+                        "heat")
     p.add_argument("--mesh-out", help="also write the target mesh coloured by the result (.ply)")
     p.add_argument("--mesh-out-dir", help="--out-dir: also write DIR/<target name>.ply coloured")
     p.add_argument("--threshold", type=float, default=None,
