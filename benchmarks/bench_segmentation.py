@@ -130,13 +130,6 @@ def changed_targets(data: Path, seg: Path, out: Path, cache, variants, change, k
     return 0
 
 
-def triangle_labels(mesh, labels: np.ndarray) -> np.ndarray:
-    """Each triangle's label: the majority of its corners' (the first corner's if all
-    differ)."""
-    a, b, c = labels[mesh.faces].T
-    return np.where((b == c) & (a != b), b, a)
-
-
 def triangles_report(data: Path, seg: Path, out: Path, cache, repeats: int) -> int:
     """``--triangles`` (module doc)."""
     from bsfjax._highlevel import ZOOMOUT_SAMPLES
@@ -152,7 +145,8 @@ def triangles_report(data: Path, seg: Path, out: Path, cache, repeats: int) -> i
             src, tgt = ds.shapes[i].mesh, ds.shapes[j].mesh
             sm, sn = (bj.spectrum(m, K_SPECTRA, cache_dir=cache) for m in (src, tgt))
             lab_m, lab_n = shape_labels(ds, i, template), shape_labels(ds, j, template)
-            tri_m, tri_n = triangle_labels(src, lab_m), triangle_labels(tgt, lab_n)
+            tri_m = bj.face_labels_from_vertices(src, lab_m)
+            tri_n = bj.face_labels_from_vertices(tgt, lab_n)
             gt = ds.ground_truth(i, j)
             lm = np.asarray(bj.farthest_point_sampling(src, N_LANDMARKS))
             maps = _maps(sm, sn, gt, 30, (lm, gt_inverse(gt, lm, tgt, src)), (src, tgt),

@@ -80,8 +80,8 @@ from ._distortion import choose_map, map_distortion, orientation_agreement
 # mesh-level entry points
 from ._highlevel import (REGIMES, LabelTransfer, MapEstimate, estimate_map, mirror_symmetry,
                          transfer_labels, transfer_values)
-from ._face_labels import (FaceShares, decide_face_labels, face_label_shares, face_scores,
-                           transfer_face_labels)
+from ._face_labels import (FaceShares, decide_face_labels, face_label_shares,
+                           face_labels_from_vertices, face_scores, transfer_face_labels)
 from ._collection import TargetTransfer, size_bucket, transfer_collection
 
 # metrics and test functions
@@ -125,7 +125,8 @@ __all__ = [
     "MapEstimate", "estimate_map", "mirror_symmetry", "LabelTransfer", "REGIMES",
     "transfer_values", "transfer_labels",
     "transfer_face_labels", "face_label_shares", "face_scores", "decide_face_labels",
-    "FaceShares", "transfer_collection", "TargetTransfer", "size_bucket",
+    "FaceShares", "face_labels_from_vertices", "transfer_collection", "TargetTransfer",
+    "size_bucket",
     # metrics
     "relative_error", "indicators_to_labels", "labels_to_indicators", "random_indicators",
     "LabelFile", "load_labels", "save_labels", "is_face_file",

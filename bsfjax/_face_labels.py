@@ -35,7 +35,7 @@ from ._spectrum import Spectrum
 from ._validate import compact_labels
 
 __all__ = ["FaceShares", "face_label_shares", "face_scores", "transfer_face_labels",
-           "decide_face_labels"]
+           "decide_face_labels", "face_labels_from_vertices"]
 
 
 class FaceShares(NamedTuple):
@@ -76,6 +76,20 @@ def face_label_shares(mesh: Mesh, face_labels: Int[ArrayLike, " m"]) -> FaceShar
     per_label = sp.coo_matrix((w, (np.repeat(codes, 3), corners)), shape=(len(ids), n))
     shares = per_label.toarray() / np.where(total > 0, total, 1.0)[None, :]
     return FaceShares(ids, shares)
+
+
+def face_labels_from_vertices(mesh: Mesh, labels: Int[ArrayLike, " n"]) -> np.ndarray:
+    """``(m,)`` labels of the triangles from ``(n,)`` labels of the vertices: each triangle
+    takes the label of the majority of its corners (of its first corner when all three differ),
+    e.g. to write a vertex segmentation as a ``.seg`` file."""
+    if not isinstance(mesh, Mesh):
+        raise BSFError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
+    lab = np.asarray(labels)
+    if lab.shape != (mesh.n_vertices,):
+        raise BSFError(f"labels must have one entry per vertex ({mesh.n_vertices}), got shape "
+                       f"{lab.shape}")
+    a, b, c = lab[mesh.faces].T
+    return np.where((b == c) & (a != b), b, a)  # else a equals b or c, or all three differ
 
 
 def face_scores(mesh: Mesh, vertex_scores: ArrayLike) -> np.ndarray:

@@ -137,19 +137,13 @@ def test_transfer_command_smpl_json_labels_in_and_out(cli_files, tmp_path, capsy
     assert "parts ['other'] are not parts of the labels file" in capsys.readouterr().err
 
 
-def _triangle_labels(mesh, vertex_labels):
-    """Each triangle's label: the majority of its corners' (the first corner's if all differ)."""
-    a, b, c = np.asarray(vertex_labels)[mesh.faces].T
-    return np.where((b == c) & (a != b), b, a)
-
-
 def test_transfer_command_labels_per_triangle(cli_files, tmp_path, capsys):
     """A .seg file (one label per triangle, as PSB / COSEG) goes in and comes out per
     triangle, as the library's transfer_face_labels gives it, with face colours in the PLY; a
     .txt of that length is read the same way; the wrong lengths and suffixes are named."""
     d, pair = cli_files
-    labels = _triangle_labels(pair.source, pair.labels)
-    truth = _triangle_labels(pair.target, pair.labels[np.asarray(pair.p2p)])
+    labels = bsfjax.face_labels_from_vertices(pair.source, pair.labels)
+    truth = bsfjax.face_labels_from_vertices(pair.target, pair.labels[np.asarray(pair.p2p)])
     np.savetxt(tmp_path / "parts.seg", labels, fmt="%d")
     np.savetxt(tmp_path / "parts.txt", labels, fmt="%d")
     np.savetxt(tmp_path / "truth.seg", truth, fmt="%d")

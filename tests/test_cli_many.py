@@ -251,11 +251,10 @@ def test_labels_per_triangle_come_back_per_triangle(files, tmp_path, capsys):
     """A .seg source: each target's triangles labelled (DIR/<stem>.seg), scored against a
     .seg truth, as the one-target command labels them; a rerun skips them."""
     small = bsfjax.example_pair(levels=1)
-    a, b, c = small.labels[small.source.faces].T
-    np.savetxt(tmp_path / "parts.seg", np.where((b == c) & (a != b), b, a), fmt="%d")
+    np.savetxt(tmp_path / "parts.seg",
+               bsfjax.face_labels_from_vertices(small.source, small.labels), fmt="%d")
     (tmp_path / "truth").mkdir()
-    t = small.labels[np.asarray(small.p2p)][small.target.faces].T
-    truth = np.where((t[1] == t[2]) & (t[0] != t[1]), t[1], t[0])
+    truth = bsfjax.face_labels_from_vertices(small.target, small.labels[np.asarray(small.p2p)])
     np.savetxt(tmp_path / "truth" / "t506.seg", truth, fmt="%d")
     out = tmp_path / "out"
     argv = _argv(files, out, files / "tg" / "t506.ply",

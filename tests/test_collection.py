@@ -132,8 +132,7 @@ def test_labels_of_triangles_equal_the_one_pair_path(collection):
     """faces=True: each target's triangles labelled as estimate_map then transfer_face_labels
     label them (padded targets: the padding adds no triangle)."""
     small, targets, lm, _ = collection
-    a, b, c = small.labels[small.source.faces].T
-    faces = np.where((b == c) & (a != b), b, a)
+    faces = bsfjax.face_labels_from_vertices(small.source, small.labels)
     got = dict(transfer_collection(small.source, faces, targets, method="refined", k=10,
                                    landmarks=lambda i: lm.get(i), zoomout_samples=300,
                                    faces=True))

@@ -30,6 +30,14 @@ def test_shares_are_the_area_shares_of_each_star():
     np.testing.assert_allclose(shares, expected, rtol=0, atol=1e-15)
 
 
+def test_triangles_take_the_majority_of_their_corners():
+    mesh = _kite()  # triangles (0, 1, 2), (1, 3, 2), (0, 4, 1)
+    got = bsfjax.face_labels_from_vertices(mesh, np.array([0, 1, 1, 2, 3]))
+    np.testing.assert_array_equal(got, [1, 1, 0])  # corners 0 1 1, 1 2 1; 0 3 1 all differ
+    with pytest.raises(BSFError, match="one entry per vertex"):
+        bsfjax.face_labels_from_vertices(mesh, np.zeros(3, int))
+
+
 def test_face_scores_average_the_corners():
     mesh = _kite()
     s = np.arange(10.0).reshape(2, 5)
@@ -142,8 +150,7 @@ def test_smpl_parts_of_faust_by_triangle():
     source = bsfjax.load_mesh(data_path("faust", "tr_reg_000.off"))
     target = bsfjax.load_mesh(data_path("faust", "tr_reg_001.off"))
     vertex_labels, _ = bsfjax.load_labels(seg)
-    a, b, c = vertex_labels[source.faces].T
-    labels = np.where((b == c) & (a != b), b, a)
+    labels = bsfjax.face_labels_from_vertices(source, vertex_labels)
     sm, sn = bsfjax.spectrum(source, 4), bsfjax.spectrum(target, 4)
     res = transfer_face_labels(sm, sn, labels, source_mesh=source, target_mesh=target,
                                method="p2p", p2p=np.arange(target.n_vertices))
