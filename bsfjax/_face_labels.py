@@ -45,6 +45,19 @@ class FaceShares(NamedTuple):
     shares: np.ndarray  # (L, n) share of label ids[i] in each vertex's star; columns sum to 1
 
 
+def _one_per(mesh: Mesh, values, name: str, element: str) -> np.ndarray:
+    """``values`` as an array with one entry per ``element`` (``"face"`` / ``"vertex"``) of
+    ``mesh``, or a named error."""
+    if not isinstance(mesh, Mesh):
+        raise BSFError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
+    arr = np.asarray(values)
+    n = mesh.n_faces if element == "face" else mesh.n_vertices
+    if arr.shape != (n,):
+        raise BSFError(f"{name} must have one entry per {element} of the mesh ({n}), got shape "
+                       f"{arr.shape}")
+    return arr
+
+
 def face_label_shares(mesh: Mesh, face_labels: Int[ArrayLike, " m"]) -> FaceShares:
     r"""Each label's share of every vertex's star: the vertex functions that carry a face
     labelling (module doc, :math:`s_l(v)`).
@@ -58,12 +71,7 @@ def face_label_shares(mesh: Mesh, face_labels: Int[ArrayLike, " m"]) -> FaceShar
     the triangles around ``v`` labelled ``ids[i]``.  Around a vertex whose triangles all have
     zero area the triangles count equally; a vertex in no triangle has no share.
     """
-    if not isinstance(mesh, Mesh):
-        raise BSFError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
-    lab = np.asarray(face_labels)
-    if lab.shape != (mesh.n_faces,):
-        raise BSFError(f"face_labels must have one entry per face of the mesh ({mesh.n_faces}), "
-                       f"got shape {lab.shape}")
+    lab = _one_per(mesh, face_labels, "face_labels", "face")
     ids, codes = compact_labels(lab, "face_labels")  # integers >= 0, as transfer_labels's
     area = mesh.face_areas()
     n = mesh.n_vertices
@@ -82,13 +90,7 @@ def face_labels_from_vertices(mesh: Mesh, labels: Int[ArrayLike, " n"]) -> np.nd
     """``(m,)`` labels of the triangles from ``(n,)`` labels of the vertices: each triangle
     takes the label of the majority of its corners (of its first corner when all three differ),
     e.g. to write a vertex segmentation as a ``.seg`` file."""
-    if not isinstance(mesh, Mesh):
-        raise BSFError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
-    lab = np.asarray(labels)
-    if lab.shape != (mesh.n_vertices,):
-        raise BSFError(f"labels must have one entry per vertex ({mesh.n_vertices}), got shape "
-                       f"{lab.shape}")
-    a, b, c = lab[mesh.faces].T
+    a, b, c = _one_per(mesh, labels, "labels", "vertex")[mesh.faces].T
     return np.where((b == c) & (a != b), b, a)  # else a equals b or c, or all three differ
 
 

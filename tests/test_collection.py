@@ -100,18 +100,24 @@ def collection():
     return small, targets, lm, res
 
 
+def _one_pair_maps(small, targets, lm):
+    """``(i, target, source spectrum, target spectrum, estimate_map)`` of the one-pair path
+    for each target of the ``collection`` fixture (its options)."""
+    sm = bsfjax.spectrum(small.source, 100)
+    for i, t in enumerate(targets):
+        sn = bsfjax.spectrum(t, 100)
+        yield i, t, sm, sn, bsfjax.estimate_map(
+            sm.truncate(20), sn.truncate(20), k=10, refine_to=20, landmarks=lm.get(i),
+            source_mesh=small.source, target_mesh=t, zoomout_samples=300)
+
+
 def test_padded_targets_equal_the_one_pair_path(collection):
     """Each target's result, computed padded to its size bucket, is the one of the unpadded
     one-pair path, estimate_map then transfer_labels (what ``bsfjax transfer --out`` runs):
     the same point map and labels, bit for bit (``"refined"`` continuing on ZoomOut's samples)."""
     small, targets, lm, padded = collection
     assert all(size_bucket(t.n_vertices) > t.n_vertices for t in targets)  # really padded
-    sm = bsfjax.spectrum(small.source, 100)
-    for i, t in enumerate(targets):
-        sn = bsfjax.spectrum(t, 100)
-        est = bsfjax.estimate_map(sm.truncate(20), sn.truncate(20), k=10, refine_to=20,
-                                  landmarks=lm.get(i), source_mesh=small.source, target_mesh=t,
-                                  zoomout_samples=300)
+    for i, t, sm, sn, est in _one_pair_maps(small, targets, lm):
         res = bsfjax.transfer_labels(sm, sn, small.labels, C=est.C, p2p=est.p2p,
                                      mesh=small.source, samples=est.samples)
         assert padded[i].labels.shape == padded[i].p2p.shape == (t.n_vertices,)
@@ -136,12 +142,7 @@ def test_labels_of_triangles_equal_the_one_pair_path(collection):
     got = dict(transfer_collection(small.source, faces, targets, method="refined", k=10,
                                    landmarks=lambda i: lm.get(i), zoomout_samples=300,
                                    faces=True))
-    sm = bsfjax.spectrum(small.source, 100)
-    for i, t in enumerate(targets):
-        sn = bsfjax.spectrum(t, 100)
-        est = bsfjax.estimate_map(sm.truncate(20), sn.truncate(20), k=10, refine_to=20,
-                                  landmarks=lm.get(i), source_mesh=small.source, target_mesh=t,
-                                  zoomout_samples=300)
+    for i, t, sm, sn, est in _one_pair_maps(small, targets, lm):
         res = bsfjax.transfer_face_labels(sm, sn, faces, source_mesh=small.source,
                                           target_mesh=t, C=est.C, p2p=est.p2p,
                                           samples=est.samples)
