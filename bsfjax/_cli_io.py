@@ -34,9 +34,10 @@ def _read_array(path: str, what: str, dtype=None):
     if not np.issubdtype(arr.dtype, np.number):
         raise CLIError(f"{what} file {p}: expected numbers, got dtype {arr.dtype}")
     if dtype is int and not np.issubdtype(arr.dtype, np.integer):
-        bad = ~np.isfinite(arr) | (np.mod(arr, 1) != 0) | (np.abs(arr) >= 2.0**63)
-        if bad.any():  # the value as read, not as a wrapped-around int64
-            i = int(np.argmax(bad.reshape(-1)))
+        from ._validate import non_integer_entry
+
+        i = non_integer_entry(arr)
+        if i is not None:  # the value as read, not as a wrapped-around int64
             raise CLIError(f"{what} file {p}: expected integers, found {arr.reshape(-1)[i].item()!r} "
                            f"(entry {i})")
         arr = arr.astype(np.int64)

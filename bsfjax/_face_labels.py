@@ -32,7 +32,7 @@ from ._errors import BSFError
 from ._highlevel import LabelTransfer, _decide_labels, _split_label_kwargs, transfer_values
 from ._mesh import Mesh
 from ._spectrum import Spectrum
-from ._validate import compact_labels
+from ._validate import check_source_mesh, compact_labels
 
 __all__ = ["FaceShares", "face_label_shares", "face_scores", "transfer_face_labels",
            "decide_face_labels", "face_labels_from_vertices"]
@@ -127,12 +127,10 @@ def transfer_face_labels(source: Spectrum, target: Spectrum, face_labels: Int[Ar
     at every border whatever the map, so they say nothing of how sure the transfer is, and
     the regime of ``"refined"`` comes from the agreement alone.
     """
-    for mesh, spec, what in ((source_mesh, source, "source"), (target_mesh, target, "target")):
+    for mesh, spec, role in ((source_mesh, source, "source"), (target_mesh, target, "target")):
         if not isinstance(mesh, Mesh):
-            raise BSFError(f"{what}_mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
-        if mesh.n_vertices != spec.n_vertices:
-            raise BSFError(f"{what}_mesh has {mesh.n_vertices} vertices but the {what} spectrum "
-                           f"has {spec.n_vertices}")
+            raise BSFError(f"{role}_mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
+        check_source_mesh(mesh, spec.n_vertices, spec.mass, f"{role}_mesh", role)
     if "mesh" in kwargs:
         raise BSFError("transfer_face_labels passes source_mesh on as mesh: do not give mesh=")
     ids, shares = face_label_shares(source_mesh, face_labels)

@@ -29,6 +29,7 @@ import numpy as np
 
 from ._errors import BSFError
 from ._files import atomic_path, write_text_atomic
+from ._validate import non_integer_entry
 
 __all__ = ["LabelFile", "load_labels", "save_labels", "is_face_file", "UNASSIGNED_PART"]
 
@@ -87,9 +88,8 @@ def _load(path, what: str) -> LabelFile:
     if lab.ndim != 1 or lab.size == 0 or not np.issubdtype(lab.dtype, np.number):
         raise BSFError(f"{expected}, got {'no data' if lab.size == 0 else f'shape {lab.shape}'}"
                        f"{'' if np.issubdtype(lab.dtype, np.number) else f' of {lab.dtype}'}")
-    bad = ~np.isfinite(lab) | (np.mod(lab, 1) != 0) | (lab < 0) | (lab >= 2.0 ** 63)
-    if bad.any():  # the value as read, not as a wrapped-around int64
-        i = int(np.argmax(bad))
+    i = non_integer_entry(lab, negative=False)
+    if i is not None:
         raise BSFError(f"{expected}, found {lab[i].item()!r} (entry {i})")
     return LabelFile(lab.astype(np.int64), None)
 

@@ -71,6 +71,17 @@ def _given(arr: np.ndarray, i: int) -> str:
     return str(arr.reshape(-1)[i].item())
 
 
+def non_integer_entry(arr, *, negative: bool = True) -> int | None:
+    """Flat index of the first entry of a numeric array that is not a finite integer an int64
+    holds (or is negative, unless ``negative``), or ``None``: the value as read, before a
+    cast would wrap it around."""
+    a = np.asarray(arr).reshape(-1)
+    bad = ~np.isfinite(a) | (np.mod(a, 1) != 0) | (np.abs(a) >= 2.0 ** 63)
+    if not negative:
+        bad |= a < 0
+    return int(np.argmax(bad)) if bad.any() else None
+
+
 def check_indices(idx, name: str, n: int, *, what: str = "vertex indices",
                   allow_empty: bool = False) -> np.ndarray:
     """Concrete integer indices in ``[0, n)`` as an ``int64`` numpy array.
@@ -115,11 +126,12 @@ def compact_labels(labels, name: str = "labels") -> tuple[np.ndarray, np.ndarray
     return ids, codes.reshape(lab.shape).astype(np.int64)
 
 
-def check_source_mesh(mesh, n_vertices: int, mass, name: str = "mesh") -> None:
+def check_source_mesh(mesh, n_vertices: int, mass, name: str = "mesh",
+                      role: str = "source") -> None:
     """Raise unless ``mesh`` (a :class:`bsfjax.Mesh` or ``(n, 3)`` points) is the shape whose
     spectrum has ``n_vertices`` vertices and areas ``mass``: the vertex count must match, and
     for a Mesh its total area must equal ``Σ mass`` (a pose of the same template has the same
-    count but another area)."""
+    count but another area).  ``role``: which of the pair's shapes it is, for the messages."""
     if hasattr(mesh, "faces") and hasattr(mesh, "vertices"):
         nv = int(np.shape(mesh.vertices)[0])
     else:
@@ -128,8 +140,8 @@ def check_source_mesh(mesh, n_vertices: int, mass, name: str = "mesh") -> None:
             raise BSFError(f"{name} must be a bsfjax.Mesh or (n, d) points, got shape {shape}")
         nv = shape[0]
     if nv != n_vertices:
-        raise BSFError(f"{name} has {nv} vertices but the source spectrum has {n_vertices}: "
-                       f"{name}= must be the source mesh")
+        raise BSFError(f"{name} has {nv} vertices but the {role} spectrum has {n_vertices}: "
+                       f"{name}= must be the {role} mesh")
     if not hasattr(mesh, "faces") or mass is None or is_traced(mass):
         return
     v = np.asarray(mesh.vertices, np.float64)
@@ -138,8 +150,8 @@ def check_source_mesh(mesh, n_vertices: int, mass, name: str = "mesh") -> None:
                                 axis=1).sum()
     total = float(np.sum(np.asarray(mass, np.float64)))
     if not math.isclose(area, total, rel_tol=1e-4):
-        raise BSFError(f"{name} has total area {area:.6g} but the source spectrum's areas sum "
-                       f"to {total:.6g}: {name}= must be the source mesh (the one the source "
+        raise BSFError(f"{name} has total area {area:.6g} but the {role} spectrum's areas sum "
+                       f"to {total:.6g}: {name}= must be the {role} mesh (the one the {role} "
                        "spectrum was computed on)")
 
 

@@ -135,6 +135,9 @@ def test_bad_input_is_named(spheres):
         transfer_face_labels(sm, sn, -np.ones(source.n_faces, int), **kw)
     with pytest.raises(BSFError, match="integers"):
         transfer_face_labels(sm, sn, np.full(source.n_faces, 0.5), **kw)
+    with pytest.raises(BSFError, match="target_mesh has total area .* the target spectrum"):
+        transfer_face_labels(sm, sn, np.zeros(source.n_faces, int),
+                             **{**kw, "target_mesh": source})  # same count, another shape
     with pytest.raises(BSFError, match="target_mesh has 5 vertices"):
         transfer_face_labels(sm, sn, np.zeros(source.n_faces, int),
                              **{**kw, "target_mesh": _kite()})
