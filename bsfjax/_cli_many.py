@@ -191,16 +191,16 @@ def cmd_transfer_many(args, error) -> int:
             continue
         rec = {"target": str(path), "status": "ok", "vertices": res.n_vertices,
                "map_energy": res.map_energy, "seconds": round(res.seconds, 4)}
-        # the target's triangles: read once, for the face labels and the coloured mesh
-        target = load_mesh(path) if per_face or mesh_dir is not None else None
+        # the target mesh, read again only for the coloured mesh or a triangle truth's areas
+        target = (load_mesh(path) if mesh_dir is not None or (per_face and args.truth_dir)
+                  else None)
         if labels:
-            mass, n = res.mass, res.n_vertices
-            if per_face:
-                mass, n = target.face_areas(), target.n_faces
             rec.update(unassigned_share=res.unassigned_share, regime=res.regime,
                        confidence=res.confidence, agreement=res.agreement)
-            truth = _truth(args.truth_dir, path.stem, n, part_names, error, per_face)
+            truth = _truth(args.truth_dir, path.stem, len(res.labels), part_names, error,
+                           per_face)
             if truth is not None:
+                mass = target.face_areas() if per_face else res.mass
                 rec["accuracy"] = float(np.sum(mass * (res.labels == truth)) / np.sum(mass))
             result = res.labels.astype(np.int64)
         else:
