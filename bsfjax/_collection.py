@@ -52,11 +52,11 @@ from ._errors import BSFError
 from ._orientation import _geometry
 from ._fmap import _default_chunk
 from ._highlevel import LANDMARK_FREE_STARTS, WKS_VARIANCE, ZOOMOUT_SAMPLES, _check_landmarks, \
-    _check_starts, _decide_labels, default_threshold, estimate_map, mirror_symmetry
+    _check_starts, _decide_labels, _split_label_kwargs, estimate_map, mirror_symmetry
 from ._face_labels import decide_face_labels, face_label_shares
 from ._indicators import labels_to_indicators
 from ._mesh import Mesh, load_mesh
-from ._methods import BSF, GeodesicBalls, RefinedPullBack, SaturatedHeat, as_method, \
+from ._methods import BSF, GeodesicBalls, SaturatedHeat, as_method, \
     method_name
 from ._refine import REFINE_EIGENPAIRS
 from ._sampling import Subsample, subsample
@@ -289,11 +289,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         if F.ndim != 2 or F.shape[1] != n_m or not np.all(np.isfinite(F)):
             raise BSFError(f"values must be finite, of shape (n_source,) or (m, n_source) with "
                            f"n_source = {n_m}, got {vals.shape}")
-    refined = isinstance(method, RefinedPullBack)
-    if threshold is None:
-        threshold = default_threshold(method)
-    if not 0 <= threshold < 1:
-        raise BSFError(f"threshold must be in [0, 1), got {threshold!r}")
+    _, _, threshold, refined = _split_label_kwargs(method, threshold, {})
     k_map = 2 * k
     k_spec = max(k_map, REFINE_EIGENPAIRS) if getattr(method, "full_spectra", False) else k_map
     if k_spec >= n_m:
