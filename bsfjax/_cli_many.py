@@ -138,8 +138,8 @@ def cmd_transfer_many(args, error) -> int:
     from tqdm import tqdm
 
     from ._collection import process_share, transfer_collection
-    from ._files import atomic_path, write_text_atomic
-    from ._label_files import _json_text
+    from ._files import atomic_path
+    from ._label_files import save_labels
     from ._mesh import load_mesh
     from ._mesh_write import save_mesh
 
@@ -211,12 +211,11 @@ def cmd_transfer_many(args, error) -> int:
             coloured = coloured_data(result, labels)
             save_mesh(mesh_dir / f"{path.stem}.ply", target, immediate=True,
                       **({"cell_data": coloured} if per_face else {"point_data": coloured}))
-        if part_names is not None:
-            write_text_atomic(out_dir / f"{path.stem}.json", _json_text(result, part_names),
-                              immediate=True)
+        if labels:
+            save_labels(out_dir / f"{path.stem}{suffix}", result, part_names, immediate=True)
         else:
             with atomic_path(out_dir / f"{path.stem}{suffix}", immediate=True) as tmp:
-                np.savetxt(tmp, result, fmt="%d" if labels else "%.8g")
+                np.savetxt(tmp, result, fmt="%.8g")
         records[path.stem] = rec
     bar.close()
     _write_summary(out_dir, targets, records, multi)

@@ -115,7 +115,7 @@ def _load_json(path: Path, what: str) -> LabelFile:
     return LabelFile(lab, names)
 
 
-def save_labels(path: str | os.PathLike, labels, names=None) -> None:
+def save_labels(path: str | os.PathLike, labels, names=None, *, immediate: bool = False) -> None:
     """Write a segmentation atomically, in the form the suffix names (module doc).
 
     **Arguments:**
@@ -125,6 +125,8 @@ def save_labels(path: str | os.PathLike, labels, names=None) -> None:
     - ``names``: the name of each label (``.json``; default ``"0"``, ``"1"``, …).  Every name
       is written, a part with no vertex as an empty list, so a transferred segmentation keeps
       its source's parts; unassigned vertices go under :data:`UNASSIGNED_PART`.
+    - ``immediate``: put the file in place at once even inside an output transaction
+      (``bsfjax transfer --out-dir`` keeps each target's file as it finishes).
     """
     path = Path(path)
     lab = np.asarray(labels)
@@ -135,13 +137,13 @@ def save_labels(path: str | os.PathLike, labels, names=None) -> None:
     if suffix not in (".json", ".txt", ".npy", *FACE_SUFFIXES):
         raise BSFError(f"labels file {path}: use a .json, .txt, .npy or .seg file name")
     if suffix == ".npy":
-        with atomic_path(path) as tmp, open(tmp, "wb") as fh:  # a handle: np.save adds no suffix
+        with atomic_path(path, immediate=immediate) as tmp, open(tmp, "wb") as fh:  # (no suffix)
             np.save(fh, lab.astype(np.int64))
         return
     if suffix != ".json":  # one integer per line
-        write_text_atomic(path, "".join(f"{v}\n" for v in lab.tolist()))
+        write_text_atomic(path, "".join(f"{v}\n" for v in lab.tolist()), immediate=immediate)
         return
-    write_text_atomic(path, _json_text(lab, names))
+    write_text_atomic(path, _json_text(lab, names), immediate=immediate)
 
 
 def _json_text(lab: np.ndarray, names) -> str:
