@@ -14,10 +14,10 @@ owns each step, see ``docs/architecture.md``)::
     frame       Frame, SparseFrame, build_frame, transfer_frame, ...          _frame, ...
     coding      OMP, ErrorOMP, LeastSquares, Lasso, encode, decode            _coding, ...
     transfer    METHODS, BSF, ..., Pair, transfer, transfer_pairs             _methods, _transfer
-    maps        wks, hks, estimate_fmap, zoomout, fmap_to_p2p, estimate_map   _fmap, _estimation, ...
+    maps        wks, hks, estimate_fmap, zoomout, fmap_to_p2p                 _fmap, _estimation, ...
                 orientation_bases (the orientation term's face scan, shared)   _orientation
                 map_distortion, orientation_agreement, choose_map             _distortion
-                mirror_symmetry                                               _highlevel
+                estimate_map, mirror_symmetry (mesh to mesh)                  _map_estimate
     mesh level  transfer_values, transfer_labels                              _highlevel
                 transfer_face_labels, face_label_shares (labels per triangle) _face_labels
     collection  transfer_collection (one source to many targets, batched)    _collection
@@ -78,8 +78,8 @@ from ._orientation import OrientationBasis, orientation_bases
 from ._distortion import choose_map, map_distortion, orientation_agreement
 
 # mesh-level entry points
-from ._highlevel import (REGIMES, LabelTransfer, MapEstimate, estimate_map, mirror_symmetry,
-                         transfer_labels, transfer_values)
+from ._map_estimate import MapEstimate, estimate_map, mirror_symmetry
+from ._highlevel import REGIMES, LabelTransfer, transfer_labels, transfer_values
 from ._face_labels import (FaceShares, decide_face_labels, face_label_shares,
                            face_labels_from_vertices, face_scores, transfer_face_labels)
 from ._collection import TargetTransfer, size_bucket, transfer_collection

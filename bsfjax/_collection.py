@@ -51,8 +51,9 @@ from ._collection_stages import _Config, _dispatch, _stages_for
 from ._errors import BSFError
 from ._orientation import _geometry
 from ._fmap import _default_chunk
-from ._highlevel import LANDMARK_FREE_STARTS, WKS_VARIANCE, ZOOMOUT_SAMPLES, _check_landmarks, \
-    _check_starts, _decide_labels, _split_label_kwargs, estimate_map, mirror_symmetry
+from ._highlevel import _decide_labels, _split_label_kwargs
+from ._map_estimate import LANDMARK_FREE_STARTS, WKS_VARIANCE, ZOOMOUT_SAMPLES, _check_landmarks, \
+    _check_starts, estimate_map, mirror_symmetry
 from ._face_labels import decide_face_labels, face_label_shares
 from ._indicators import labels_to_indicators
 from ._mesh import Mesh, load_mesh

@@ -23,7 +23,7 @@ from ._estimation import FmapWeights, _cast, _energy, _setup, _Shape, _shape_ops
     _weights_array
 from ._orientation import _Geometry
 from ._fmap import _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
-from ._highlevel import ORIENT_WEIGHT, WKS_VARIANCE, ZOOMOUT_STEP
+from ._map_estimate import ORIENT_WEIGHT, WKS_VARIANCE, ZOOMOUT_STEP
 from ._methods import Pair, SpectralProjection
 from ._sampling import Subsample
 from ._spectrum import Spectrum

@@ -83,7 +83,8 @@ def run_demo(out_dir: str | Path | None = "bsfjax-demo", *, levels: int = 3, k: 
     from ._fmap import fmap_from_p2p, fmap_to_p2p
     from ._frame import build_frame
     from ._geodesics import geodesic_error
-    from ._highlevel import estimate_map, transfer_labels
+    from ._highlevel import transfer_labels
+    from ._map_estimate import estimate_map
     from ._indicators import random_indicators
     from ._metrics import relative_error
     from ._refine import REFINE_EIGENPAIRS

@@ -254,7 +254,8 @@ def fmap_from_p2p(source_spectrum: Spectrum, target_spectrum: Spectrum, p2p) -> 
 
 
 def fmap_to_p2p(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *,
-                adjoint: bool = False, chunk_size: int | None = None) -> jax.Array:
+                adjoint: bool = False, chunk_size: int | None = None,
+                rows=None) -> jax.Array:
     """The point map of a functional map: nearest neighbours in the aligned spectral embedding.
 
     Each target vertex ``y`` takes the source vertex ``x`` minimizing ``‖Φ_M(x) Cᵀ − Φ_N(y)‖``
@@ -271,21 +272,30 @@ def fmap_to_p2p(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *,
             orthogonal C; pyFM's ``use_adj``).
         chunk_size: target vertices per chunk (memory ``chunk_size × n_M``); default about
             2 M distances at once.
+        rows: target vertex indices to map (default: every vertex).  Each vertex's match is
+            the one it has in the whole map; only the search is smaller.
 
     Returns:
-        ``(n_N,)`` int32: ``p2p[i]`` is the source vertex matched to target vertex ``i``.
+        ``(n_N,)`` int32: ``p2p[i]`` is the source vertex matched to target vertex ``i``
+        (with ``rows``, ``(len(rows),)``: the match of vertex ``rows[i]``).
     """
     _check_spectrum(source_spectrum, "source_spectrum")
     _check_spectrum(target_spectrum, "target_spectrum")
     kn, km = _check_fmap(C, source_spectrum.k, target_spectrum.k)
-    chunk = _chunk_for(source_spectrum.n_vertices, target_spectrum.n_vertices, chunk_size)
+    if rows is not None:
+        rows = check_indices(rows, "rows", target_spectrum.n_vertices,
+                             what="target vertex indices")
+        if rows.ndim != 1:
+            raise BSFError(f"rows must be a 1-D array of target vertices, got shape {rows.shape}")
+    n_query = target_spectrum.n_vertices if rows is None else rows.size
+    chunk = _chunk_for(source_spectrum.n_vertices, n_query, chunk_size)
     # the two shapes at one area near 1 before the float32 cast (bsfjax.unit_area_pair): the
     # default comparison presumes an orthogonal C, which an isometry has only at equal areas
     # (the adjoint one is invariant to the areas: Φ_N C and Φ_M both scale by √a_M)
     sm, am, sn, an = unit_area_pair(source_spectrum, target_spectrum)
     C = map_to_unit_area(C, am, an)
-    return _fmap_to_p2p_jit(C, sm.evecs[:, :km], sn.evecs[:, :kn],
-                            chunk=chunk, adjoint=bool(adjoint))
+    evecs_n = sn.evecs[:, :kn] if rows is None else sn.evecs[rows, :kn]
+    return _fmap_to_p2p_jit(C, sm.evecs[:, :km], evecs_n, chunk=chunk, adjoint=bool(adjoint))
 
 
 # --------------------------------------------------------------------------- ZoomOut

@@ -138,7 +138,7 @@ CLI_EXCLUDED = ("std2",)
 
 def one_start(args, k: int):
     """``estimate_map``'s ``starts`` for ``--one-start`` (``None``: its default)."""
-    from ._highlevel import WKS_VARIANCE
+    from ._map_estimate import WKS_VARIANCE
 
     return ((k, WKS_VARIANCE),) if args.one_start else None
 
@@ -190,7 +190,8 @@ def _cmd_transfer(args) -> int:
 def _transfer_one(args) -> int:
     import numpy as np
 
-    from ._highlevel import estimate_map, transfer_labels, transfer_values
+    from ._highlevel import transfer_labels, transfer_values
+    from ._map_estimate import estimate_map
     from ._mesh import load_mesh
     from ._mesh_write import save_mesh
     from ._spectrum import spectrum
@@ -278,7 +279,7 @@ def _transfer_one(args) -> int:
                   f"orientation agreement {est.orientation:.1%}", file=sys.stderr)
     common = dict(C=C, p2p=p2p, method=args.method, mesh=source)
     if args.method == "refined":  # its continuation runs on the samples of the map's ZoomOut
-        from ._highlevel import ZOOMOUT_SAMPLES
+        from ._map_estimate import ZOOMOUT_SAMPLES
         from ._sampling import subsample
 
         common["samples"] = (est.samples if kind == "estimate" else

@@ -53,6 +53,15 @@ def icosphere(subdivisions: int = 2, radius: float = 1.0) -> tuple[np.ndarray, n
     return v, f
 
 
+@pytest.fixture(scope="module")
+def small_pair():
+    """The built-in example pair (levels=2) and spectra of 40 eigenpairs."""
+    import bsfjax
+
+    pair = bsfjax.example_pair(levels=2)
+    return pair, bsfjax.spectrum(pair.source, 40), bsfjax.spectrum(pair.target, 40)
+
+
 @pytest.fixture(scope="session")
 def sphere_mesh():
     import bsfjax

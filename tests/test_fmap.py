@@ -190,10 +190,19 @@ def test_fmap_to_p2p_matches_ckdtree(small_pair, adjoint):
         assert abs(area_ratio(sm, sn) - 1) > 0.005  # areas 1 % apart: the ratio matters
         expect = ref_to_p2p(C, sm.evecs, sn.evecs, area_ratio(sm, sn))
         assert not np.array_equal(expect, ref_to_p2p(C, sm.evecs, sn.evecs))
+    rows = np.random.default_rng(5).choice(sn.n_vertices, 150, replace=False)
     with jax.enable_x64(True):
         got = np.asarray(fmap_to_p2p(C, sm, sn, adjoint=adjoint, chunk_size=64))
+        # some target vertices only: each its match in the whole map
+        part = np.asarray(fmap_to_p2p(C, sm, sn, adjoint=adjoint, chunk_size=64, rows=rows))
     np.testing.assert_array_equal(got, expect)
     assert got.dtype == np.int32 and got.shape == (sn.n_vertices,)
+    np.testing.assert_array_equal(part, expect[rows])
+    for bad, msg in (([sn.n_vertices], "rows must be target vertex indices in"),
+                     ([[0, 1]], "rows must be a 1-D array"),
+                     (np.zeros(0, int), "rows is empty")):
+        with pytest.raises(BSFError, match=msg):
+            fmap_to_p2p(C, sm, sn, rows=bad)
 
 
 # --------------------------------------------------------------------------- refinement

@@ -34,7 +34,8 @@ from tqdm.auto import tqdm
 
 from .._errors import BSFError
 from .._fmap import fmap_from_p2p
-from .._highlevel import WKS_VARIANCE, ZOOMOUT_SAMPLES, estimate_map, transfer_labels
+from .._highlevel import transfer_labels
+from .._map_estimate import WKS_VARIANCE, ZOOMOUT_SAMPLES, estimate_map
 from .._label_files import load_labels
 from .._mesh import mesh_edges
 from .._refine import REFINE_EIGENPAIRS

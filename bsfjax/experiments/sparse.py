@@ -18,7 +18,7 @@ from . import _engine
 from ._datasets import Dataset
 from .._errors import BSFError
 from .._fmap import fmap_from_p2p
-from .._highlevel import estimate_map
+from .._map_estimate import estimate_map
 from ._io import Report, _curve, pivot_markdown, summarize
 from .._sampling import farthest_point_sampling
 from ._shapes import N_LANDMARKS, _check_ks, _errors, _functions, prepare_shapes

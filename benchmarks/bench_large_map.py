@@ -1,0 +1,117 @@
+"""Benchmark: ``estimate_map`` without landmarks on a large pair, time and peak memory.
+
+The TOSCA cat pair of ``bench_large.py`` (``cat0`` → ``cat6`` on cat0's faces, identity
+correspondence) Loop-subdivided ``--levels`` times (0: 27.9K vertices, 1: 111.5K), spectra
+of 60 eigenpairs (cached in ``--cache``; computed before the timed call), then
+``bsfjax.estimate_map(k=30, refine_to=60)`` with the meshes and no landmarks: 15 starts, the
+choice among them, the derived landmarks and the turn check, as ``bsfjax transfer`` runs it.
+
+Two ways in the same run, each in a child process of its own (so each peak resident set
+size is its own):
+
+* ``selection``: the default.  On a target of more than ``SELECTION_VERTICES`` vertices the
+  candidates' point maps are searched only at the corners of ``SELECTION_FACES`` random
+  faces and at the distortions' samples; the kept map then over every vertex.
+* ``every vertex`` (the peer): the same call with ``SELECTION_VERTICES`` raised above the
+  target's size, so every candidate is searched over every vertex.
+
+Per way: seconds of the call (one call: it takes tens of seconds to minutes; JAX's compile
+time included, as a user's first call), peak RSS of the process, the kept start, and the
+kept map's mean geodesic error against the identity on 500 farthest-point samples of the
+target (``bsfjax.geodesic_error``, units of √area).
+
+    python benchmarks/bench_large_map.py --out R --levels 0 1
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import platform
+import resource
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_large import DATA  # noqa: E402
+
+WAYS = ("selection", "every vertex")
+
+
+def one(data: str, levels: int, way: str, cache: str, queue) -> None:
+    """One timed ``estimate_map`` in this (child) process; puts its row on ``queue``."""
+    import numpy as np
+
+    import bsfjax
+    import bsfjax._map_estimate as me
+    from bench_large import cat_pair
+
+    source, target = cat_pair(Path(data), levels)
+    sm, sn = (bsfjax.spectrum(m, 60, cache_dir=cache) for m in (source, target))
+    if way == "every vertex":
+        me.SELECTION_VERTICES = target.n_vertices + 1
+    t0 = time.perf_counter()
+    est = bsfjax.estimate_map(sm, sn, k=30, refine_to=60, source_mesh=source,
+                              target_mesh=target)
+    seconds = time.perf_counter() - t0
+    samples = np.asarray(bsfjax.farthest_point_sampling(target, 500))
+    error = bsfjax.geodesic_error(source, est.p2p[samples], samples)
+    queue.put({"levels": levels, "vertices": target.n_vertices, "way": way,
+               "seconds": round(seconds, 1),
+               "peak_rss_gb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6, 2),
+               "start": list(est.start), "derived_landmarks_kept": est.landmarks is not None,
+               "swapped": bool(est.swapped), "geodesic_error": round(float(error), 4)})
+
+
+def run(data: Path, levels, cache: Path) -> list[dict]:
+    rows = []
+    ctx = mp.get_context("spawn")  # a fresh process per way: its own peak memory
+    for lv in levels:
+        for way in WAYS:
+            queue = ctx.Queue()
+            proc = ctx.Process(target=one, args=(str(data), lv, way, str(cache), queue))
+            proc.start()
+            row = queue.get()
+            proc.join()
+            print(row, flush=True)
+            rows.append(row)
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    lines = ["| vertices | way | seconds | peak RSS GB | kept start | geodesic error |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['vertices']} | {r['way']} | {r['seconds']} | {r['peak_rss_gb']} | "
+                     f"{tuple(r['start'])} | {r['geodesic_error']} |")
+    by = {(r["levels"], r["way"]): r for r in rows}
+    for lv in sorted({r["levels"] for r in rows}):
+        a, b = by[(lv, "selection")], by[(lv, "every vertex")]
+        lines.append(f"\n{a['vertices']} vertices: the selection takes "
+                     f"{b['seconds'] / a['seconds']:.2f}× less time than every vertex, "
+                     f"peak {a['peak_rss_gb']} against {b['peak_rss_gb']} GB.")
+    lines.append(f"\n{os.cpu_count()} CPUs, {platform.machine()}.")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, required=True, help="folder for the JSON and Markdown")
+    ap.add_argument("--data", type=Path, default=DATA)
+    ap.add_argument("--levels", type=int, nargs="+", default=[0, 1])
+    ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "bsfjax-spectra")
+    args = ap.parse_args(argv)
+    from bsfjax._files import write_text_atomic
+
+    rows = run(args.data, args.levels, args.cache)
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(args.out / "large_map.json", json.dumps(rows, indent=2) + "\n")
+    write_text_atomic(args.out / "large_map.md", markdown(rows))
+    print(markdown(rows))
+
+
+if __name__ == "__main__":
+    main()

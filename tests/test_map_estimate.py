@@ -1,0 +1,283 @@
+"""estimate_map (with landmarks, from several starts, the turn check) and mirror_symmetry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import bsfjax
+from bsfjax import estimate_map
+from bsfjax._demo import example_landmarks
+
+from .conftest import data_path, icosphere
+
+
+def test_estimate_map_zoomout_step(small_pair):
+    """``zoomout_step`` is ZoomOut's ``step`` from the initial estimate: the point map equals
+    :func:`bsfjax.zoomout` with that step then :func:`bsfjax.fmap_to_p2p`, an independent route
+    (the unit-area rescaling is one common power of 4: exact); a bad step is named."""
+    pair, sm, sn = small_pair
+    lm = example_landmarks(pair)
+    maps = {}
+    for step in (1, 3):
+        est = estimate_map(sm, sn, k=20, landmarks=(lm, lm), refine_to=40, zoomout_step=step)
+        C = bsfjax.zoomout(est.C_initial, sm, sn, 40, step=step)
+        np.testing.assert_array_equal(est.p2p, bsfjax.fmap_to_p2p(C, sm, sn))
+        maps[step] = est.p2p
+    assert not np.array_equal(maps[1], maps[3])  # the step changes the path
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="zoomout_step must be an integer >= 1"):
+            estimate_map(sm, sn, k=20, landmarks=(lm, lm), refine_to=40, zoomout_step=bad)
+
+
+def test_estimate_map_without_landmarks_uses_the_orientation_term(small_pair):
+    """No landmarks: with the meshes the orientation term tells left from right (the example
+    body's arms and legs are separate parts), and it changes the estimate."""
+    pair, sm, sn = small_pair
+    gt = np.asarray(pair.p2p)
+    mass = np.asarray(sn.mass)
+    plain = estimate_map(sm, sn, k=20, refine_to=40)
+    oriented = estimate_map(sm, sn, k=20, refine_to=40, source_mesh=pair.source,
+                            target_mesh=pair.target, starts=((20, 7.0),))
+    assert not np.allclose(plain.C_initial, oriented.C_initial)
+    assert plain.distortion is None and oriented.distortion is None  # one start: no choice
+    for est in (oriented, estimate_map(sm, sn, k=20, refine_to=40, source_mesh=pair.source,
+                                       target_mesh=pair.target)):  # one start, and the default
+        acc = np.sum(mass * (pair.labels[est.p2p] == pair.labels[gt])) / mass.sum()
+        assert acc > 0.95
+    with_lm = estimate_map(sm, sn, k=20, refine_to=40, landmarks=([0], [0]),
+                           source_mesh=pair.source, target_mesh=pair.target)
+    ref = estimate_map(sm, sn, k=20, refine_to=40, landmarks=([0], [0]))
+    np.testing.assert_array_equal(with_lm.C, ref.C)  # with landmarks the meshes are unused
+
+
+def test_estimate_map_without_landmarks_keeps_the_best_start(small_pair):
+    """Several starts: the result is the start that :func:`bsfjax.choose_map` picks from the
+    single-start maps' distortion and orientation (an independent route), with those values;
+    the default starts are LANDMARK_FREE_STARTS up to ``refine_to``; bad starts are named."""
+    pair, sm, sn = small_pair
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    starts = ((10, 3.5), (20, 7.0), (30, 14.0), (12, 7.0))
+    single = [estimate_map(sm, sn, k=20, refine_to=40, starts=(s,), **meshes) for s in starts]
+    maps = np.stack([e.p2p for e in single])
+    dist = bsfjax.map_distortion(pair.source, pair.target, maps)
+    orient = bsfjax.orientation_agreement(pair.source, pair.target, maps)
+    best = bsfjax.choose_map(dist, orient)
+    est = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=0,
+                       turn_check=False, **meshes)
+    np.testing.assert_array_equal(est.p2p, single[best].p2p)
+    np.testing.assert_array_equal(est.C, single[best].C)
+    assert est.start == starts[best] and est.C_initial.shape == (starts[best][0],) * 2
+    assert est.distortion == pytest.approx(dist[best]) and est.orientation == orient[best]
+    assert est.landmarks is None and est.swapped is None
+    assert len({m.tobytes() for m in maps}) > 1  # the starts reach different maps
+    # k0 above refine_to is skipped: at refine_to = 25 the choice is among the first, second
+    # and fourth start
+    low = estimate_map(sm, sn, k=20, refine_to=25, starts=starts, derived_landmarks=0,
+                       turn_check=False, **meshes)
+    kept = [starts[i] for i in (0, 1, 3)]
+    maps = np.stack([estimate_map(sm, sn, k=20, refine_to=25, starts=(s,), **meshes).p2p
+                     for s in kept])
+    assert low.start == kept[bsfjax.choose_map(
+        bsfjax.map_distortion(pair.source, pair.target, maps),
+        bsfjax.orientation_agreement(pair.source, pair.target, maps))]
+    with pytest.raises(ValueError, match="several starts are told apart by the meshes"):
+        estimate_map(sm, sn, k=20, refine_to=40, starts=starts)
+    for bad, msg in ((5, "starts must be a sequence"), (((20,),), "starts must be"),
+                     (((0, 7.0),), "k0 must be an integer"),
+                     (((20, -1.0),), "variance must be a positive"),
+                     (((50, 7.0),), "no start has k0 <= refine_to = 40")):
+        with pytest.raises(ValueError, match=msg):
+            estimate_map(sm, sn, k=20, refine_to=40, starts=bad, **meshes)
+
+
+def test_estimate_map_without_landmarks_reads_landmarks_off_its_map(small_pair):
+    """The second estimate: landmarks read off the kept start's map (farthest source points,
+    each with the target vertex whose image is nearest), then estimate_map with them as given
+    landmarks (an independent route); kept only where choose_map prefers it."""
+    pair, sm, sn = small_pair
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    starts = ((10, 3.5), (20, 7.0))
+    first = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=0,
+                         turn_check=False, **meshes)
+    src = np.asarray(bsfjax.farthest_point_sampling(pair.source, 12))
+    v = np.asarray(pair.source.vertices)
+    near = np.argmin(np.linalg.norm(v[first.p2p][None] - v[src][:, None], axis=2), axis=1)
+    given = estimate_map(sm, sn, k=20, refine_to=40, landmarks=(src, near), **meshes)
+    maps = np.stack([first.p2p, given.p2p])
+    keep = bsfjax.choose_map(bsfjax.map_distortion(pair.source, pair.target, maps),
+                             bsfjax.orientation_agreement(pair.source, pair.target, maps))
+    est = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=12,
+                       turn_check=False, **meshes)
+    assert est.start == first.start
+    np.testing.assert_array_equal(est.p2p, [first, given][keep].p2p)
+    if keep == 1:
+        np.testing.assert_array_equal(est.landmarks[0], src)
+        np.testing.assert_array_equal(est.landmarks[1], near)
+        np.testing.assert_array_equal(est.C_initial, given.C_initial)
+    else:
+        assert est.landmarks is None
+    # on the example pair (one body in two poses) a right map reads off right landmarks
+    gt = np.asarray(pair.p2p)
+    assert np.mean(gt[near] == src) >= 0.5
+    # the samples given instead of their number: the same map
+    samples = (bsfjax.subsample(pair.source, 300), bsfjax.subsample(pair.target, 300))
+    for kw in (dict(zoomout_samples=300), dict(zoomout_samples=samples)):
+        np.testing.assert_array_equal(
+            estimate_map(sm, sn, k=20, refine_to=40, starts=starts, **kw, **meshes).p2p,
+            estimate_map(sm, sn, k=20, refine_to=40, starts=starts, zoomout_samples=300,
+                         **meshes).p2p)
+    with pytest.raises(ValueError, match="zoomout_samples must be an int, None, or"):
+        other = bsfjax.subsample(bsfjax.example_pair(levels=1).target, 100)  # 506 vertices
+        estimate_map(sm, sn, k=20, refine_to=40, zoomout_samples=(samples[0], other), **meshes)
+    with pytest.raises(ValueError, match="derived_landmarks must be an integer >= 0"):
+        estimate_map(sm, sn, k=20, refine_to=40, derived_landmarks=-1, **meshes)
+
+
+def test_estimate_map_turn_check_keeps_what_choose_map_prefers(small_pair):
+    """The turn check keeps the map without it, or an alternative that ``choose_map`` prefers
+    to it by local distortion (at TURN_RADIUS on TURN_SAMPLES samples) and orientation; with
+    landmarks or one start it does not run; a non-bool is named."""
+    from bsfjax._map_estimate import TURN_RADIUS, TURN_SAMPLES
+    pair, sm, sn = small_pair
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    starts = ((10, 3.5), (20, 7.0))
+    kw = dict(k=20, refine_to=40, starts=starts, derived_landmarks=12, **meshes)
+    without = estimate_map(sm, sn, turn_check=False, **kw)
+    est = estimate_map(sm, sn, **kw)
+    assert isinstance(est.swapped, bool) and est.start == without.start
+    if not est.swapped:
+        np.testing.assert_array_equal(est.p2p, without.p2p)
+        assert est.distortion == without.distortion
+    else:
+        both = np.stack([without.p2p, est.p2p])
+        local = bsfjax.map_distortion(pair.source, pair.target, both, n_samples=TURN_SAMPLES,
+                                      radius=TURN_RADIUS)
+        orient = bsfjax.orientation_agreement(pair.source, pair.target, both)
+        assert bsfjax.choose_map(local, orient) == 1
+    one = estimate_map(sm, sn, k=20, refine_to=40, starts=((20, 7.0),), **meshes)
+    assert one.swapped is None
+
+
+def test_turn_check_keeps_the_map_of_a_target_too_coarse_for_it(small_pair, monkeypatch):
+    """No two target samples closer than the radius (here: a radius below every edge): no
+    local distortion to compare, so the map without the check is kept, not an error."""
+    import bsfjax._map_estimate as hl
+    pair, sm, sn = small_pair
+    kw = dict(k=20, refine_to=40, starts=((10, 3.5), (20, 7.0)), source_mesh=pair.source,
+              target_mesh=pair.target)
+    without = estimate_map(sm, sn, turn_check=False, **kw)
+    monkeypatch.setattr(hl, "TURN_RADIUS", 1e-9)
+    est = estimate_map(sm, sn, **kw)
+    assert est.swapped is False
+    np.testing.assert_array_equal(est.p2p, without.p2p)
+    with pytest.raises(ValueError, match="turn_check must be True or False"):
+        estimate_map(sm, sn, turn_check="yes", **kw)
+
+
+def test_turn_check_unturns_a_faust_pair():
+    """FAUST 001 → 010 (two people) without landmarks: the choice among starts lands on a map
+    turned front to back (about a third of the SMPL parts right: the torso bands); the turn
+    check swaps it for the right one.  The source's mirror symmetry it uses maps each SMPL
+    part to its mirror part."""
+    seg = data_path("segmentations", "smpl_vert_segmentation.json")
+    src = bsfjax.load_mesh(data_path("faust", "tr_reg_001.off"))
+    tgt = bsfjax.load_mesh(data_path("faust", "tr_reg_010.off"))
+    labels, names = bsfjax.load_labels(seg)
+    sm, sn = bsfjax.spectrum(src, 60), bsfjax.spectrum(tgt, 60)
+    mirror = {n: n.replace("left", "RIGHT").replace("right", "left").replace("RIGHT", "right")
+              for n in names}
+    mirror_id = np.array([names.index(mirror[n]) for n in names])
+    sym = bsfjax.mirror_symmetry(sm, src, k=30)
+    mass = np.asarray(sm.mass)
+    assert np.sum(mass * (labels[sym] == mirror_id[labels])) / mass.sum() > 0.95
+    assert bsfjax.orientation_agreement(src, src, sym) < 0.2
+    kw = dict(k=30, refine_to=60, source_mesh=src, target_mesh=tgt)
+    mass_n = np.asarray(sn.mass)
+    acc = lambda p: np.sum(mass_n * (labels[p] == labels)) / mass_n.sum()  # noqa: E731
+    est = estimate_map(sm, sn, **kw)
+    assert est.swapped and acc(est.p2p) > 0.9
+    assert acc(estimate_map(sm, sn, turn_check=False, **kw).p2p) < 0.4
+    # the symmetry given (as transfer_collection does) or computed: one map
+    np.testing.assert_array_equal(estimate_map(sm, sn, source_symmetry=sym, **kw).p2p, est.p2p)
+
+
+def test_mirror_symmetry_of_a_shape_with_one_mirror_plane():
+    """An ellipsoid bent so that x → −x is its only symmetry (the icosphere's vertices and
+    faces are symmetric under it): the self-map is that mirror, vertex for vertex, and so
+    reverses orientation and keeps distances (the orientation-preserving estimate would be the
+    identity); bad inputs are named."""
+    from scipy.spatial import cKDTree
+    v, f = icosphere(4)
+    v = v * [1.0, 1.6, 2.3]
+    v = np.c_[v[:, 0], v[:, 1] + 0.25 * v[:, 2] ** 2, v[:, 2] + 0.3 * v[:, 1] ** 2]
+    mesh = bsfjax.Mesh(v, f)
+    mirror = cKDTree(v).query(v * [-1, 1, 1])[1]
+    np.testing.assert_allclose(v[mirror], v * [-1, 1, 1], atol=1e-12)
+    spec = bsfjax.spectrum(mesh, 40)
+    sym = bsfjax.mirror_symmetry(spec, mesh, k=20, samples=None)
+    assert sym.shape == (mesh.n_vertices,) and np.mean(sym == mirror) > 0.99
+    assert bsfjax.orientation_agreement(mesh, mesh, sym) < 0.05
+    assert np.mean(sym == np.arange(mesh.n_vertices)) < 0.05  # only the plane's own points
+    rows = np.array([7, 0, 7, 100])  # some vertices only: their images in the whole map
+    np.testing.assert_array_equal(
+        bsfjax.mirror_symmetry(spec, mesh, k=20, samples=None, rows=rows), sym[rows])
+    with pytest.raises(ValueError, match="refine_to must be an integer"):
+        bsfjax.mirror_symmetry(spec, mesh, k=20, refine_to=50)
+    with pytest.raises(ValueError, match="vertices but the source spectrum has"):
+        bsfjax.mirror_symmetry(spec, bsfjax.Mesh(*icosphere(2)), k=20)
+    with pytest.raises(ValueError, match="source_symmetry must have one source vertex"):
+        pair = bsfjax.example_pair(levels=1)
+        s1 = bsfjax.spectrum(pair.source, 20)
+        estimate_map(s1, bsfjax.spectrum(pair.target, 20), k=10, refine_to=20,
+                     source_mesh=pair.source, target_mesh=pair.target,
+                     source_symmetry=np.arange(5))
+
+
+def test_estimate_map_on_a_large_target_compares_its_candidates_on_part_of_it(small_pair,
+                                                                          monkeypatch):
+    """Above SELECTION_VERTICES the starts' maps are searched only at the corners of
+    SELECTION_FACES random faces and at the distortion samples: with every face that is the
+    whole map again (the same result as the full comparison); with a quarter of the faces the
+    same start is kept and its map is then searched over every vertex, and the landmarks read
+    off a candidate are target vertices that were searched."""
+    import bsfjax._map_estimate as me
+    pair, sm, sn = small_pair
+    kw = dict(k=20, refine_to=40, starts=((10, 3.5), (20, 7.0), (30, 14.0)),
+              source_mesh=pair.source, target_mesh=pair.target)
+    full = estimate_map(sm, sn, **kw)
+    quick = dict(derived_landmarks=0, turn_check=False)
+    full_quick = estimate_map(sm, sn, **quick, **kw)
+    monkeypatch.setattr(me, "SELECTION_VERTICES", 100)
+    monkeypatch.setattr(me, "SELECTION_FACES", 10 ** 9)  # every face, so every vertex
+    same = estimate_map(sm, sn, **kw)
+    np.testing.assert_array_equal(same.p2p, full.p2p)
+    assert same.start == full.start and same.orientation == pytest.approx(full.orientation)
+    monkeypatch.setattr(me, "SELECTION_FACES", pair.target.n_faces // 4)
+    rows, faces = me._selection_rows(pair.target)
+    assert faces.size == pair.target.n_faces // 4 and rows.size < pair.target.n_vertices
+    part = estimate_map(sm, sn, **quick, **kw)
+    assert part.start == full_quick.start
+    np.testing.assert_array_equal(part.p2p, full_quick.p2p)  # then searched everywhere
+    est = estimate_map(sm, sn, **kw)
+    gt, mass = np.asarray(pair.p2p), np.asarray(sn.mass)
+    assert np.sum(mass * (pair.labels[est.p2p] == pair.labels[gt])) / mass.sum() > 0.95
+    if est.landmarks is not None:
+        assert np.isin(est.landmarks[1], rows).all()
+
+
+def test_landmarks_read_off_a_map_skip_the_vertices_not_searched(small_pair):
+    """``-1`` entries (target vertices not searched) are never read as landmarks: each source
+    landmark takes the searched target vertex whose image is nearest to it."""
+    from bsfjax._map_estimate import _landmarks_from_map
+    pair, _, _ = small_pair
+    gt = np.asarray(pair.p2p).astype(np.int64)
+    part = gt.copy()
+    hidden = np.arange(0, gt.size, 3)
+    part[hidden] = -1
+    src, tgt = _landmarks_from_map(pair.source, part, 8)
+    assert not np.isin(tgt, hidden).any() and (tgt >= 0).all()
+    v = np.asarray(pair.source.vertices)
+    known = np.flatnonzero(part >= 0)
+    d = np.linalg.norm(v[part[known]][None] - v[src][:, None], axis=2)
+    np.testing.assert_allclose(np.linalg.norm(v[part[tgt]] - v[src], axis=1), d.min(axis=1))
