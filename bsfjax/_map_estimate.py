@@ -107,7 +107,8 @@ DERIVED_LANDMARKS = 20
 #: ``SELECTION_FACES`` random faces and at the distortions' samples only, not at every vertex;
 #: the kept map is then searched over every vertex.  Each candidate's search is a
 #: ``rows × n_M`` nearest-neighbour search instead of ``n_N × n_M``: on TOSCA cat subdivided
-#: once (111.5K vertices) the estimate takes ... instead of 459 s (docs/benchmarks.md).
+#: once (111.5K vertices) the estimate takes 146 s instead of 357 s, with the same start
+#: kept and the same geodesic error (``benchmarks/bench_large_map.py``, docs/benchmarks.md).
 #: The orientation agreement's estimate from 4096 faces has a standard error below 0.01, a
 #: tenth of :data:`bsfjax.ORIENTATION_SLACK`.
 SELECTION_VERTICES = 20000

@@ -17,6 +17,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -216,6 +217,9 @@ BAD_INPUTS = [
     ("estimate-nan-descriptors", lambda s: bsfjax.estimate_fmap(
         s.spec, s.spec, np.full((s.n, 3), np.nan), s.descr[:, :3], k=5),
      BSFError, r"source_descr must be finite numbers"),
+    ("estimate-nan-descriptors-jax", lambda s: bsfjax.estimate_fmap(  # (checked in JAX)
+        s.spec, s.spec, s.descr[:, :3], jnp.asarray(s.descr[:, :3]).at[4, 1].set(jnp.inf), k=5),
+     BSFError, r"target_descr must be finite numbers"),
     ("estimate-k-too-large", lambda s: bsfjax.estimate_fmap(s.spec, s.spec, s.descr, s.descr,
                                                             k=50),
      BSFError, r"k=\(k_source=50, k_target=50\) must be in \[2, available\]"),
