@@ -171,8 +171,10 @@ def _distance_fn(mesh: Mesh, method: str):
 
 
 def geodesic_distances(mesh: Mesh, sources, *, method: str = "dijkstra",
-                       chunk_size: int = _DEFAULT_CHUNK) -> np.ndarray:
-    """``(len(sources), n)`` float64 geodesic distances from each source vertex to every vertex.
+                       chunk_size: int = _DEFAULT_CHUNK, targets=None) -> np.ndarray:
+    """``(len(sources), n)`` float64 geodesic distances from each source vertex to every vertex
+    (with ``targets``, ``(len(sources), len(targets))``: to those vertices only, so the memory
+    is ``chunk_size × n`` at most whatever the number of sources).
 
     ``method`` is ``"dijkstra"`` (edge graph) or ``"heat"`` (heat method); see the module doc.
     """
@@ -182,10 +184,14 @@ def geodesic_distances(mesh: Mesh, sources, *, method: str = "dijkstra",
     src = _check_indices(sources, mesh.n_vertices, "sources")
     if src.ndim != 1:
         raise BSFError(f"sources must be a 1-D array of vertex indices, got shape {src.shape}")
+    cols = slice(None) if targets is None else _check_indices(targets, mesh.n_vertices,
+                                                               "targets")
+    if targets is not None and cols.ndim != 1:
+        raise BSFError(f"targets must be a 1-D array of vertex indices, got shape {cols.shape}")
     fn = _distance_fn(mesh, method)
-    out = np.empty((len(src), mesh.n_vertices))
+    out = np.empty((len(src), mesh.n_vertices if targets is None else len(cols)))
     for lo in range(0, len(src), chunk):  # chunks of sources bound the memory, not a vertex loop
-        out[lo:lo + chunk] = fn(src[lo:lo + chunk])
+        out[lo:lo + chunk] = fn(src[lo:lo + chunk])[:, cols]
     return out
 
 

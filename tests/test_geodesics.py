@@ -47,7 +47,12 @@ def test_dijkstra_equals_floyd_warshall():
     v = v * np.array([1.0, 2.0, 0.5])
     mesh = bsfjax.Mesh(v, f)
     got = geodesic_distances(mesh, np.arange(mesh.n_vertices), chunk_size=5)
-    np.testing.assert_allclose(got, floyd_warshall(mesh), rtol=1e-12)
+    fw = floyd_warshall(mesh)
+    np.testing.assert_allclose(got, fw, rtol=1e-12)
+    # to some vertices only (repeated, unsorted): those columns
+    targets = np.array([7, 3, 7, 41, 0])
+    part = geodesic_distances(mesh, np.arange(mesh.n_vertices), chunk_size=5, targets=targets)
+    np.testing.assert_allclose(part, fw[:, targets], rtol=1e-12)
 
 
 def test_sphere_against_great_circles(sphere):
@@ -120,3 +125,7 @@ def test_bad_input_raises(sphere):
         geodesic_distances(sphere.vertices, [0])
     with pytest.raises(BSFError, match="chunk_size"):
         geodesic_distances(sphere, [0], chunk_size=0)
+    with pytest.raises(BSFError, match=rf"targets must be vertex indices in \[0, {n}\)"):
+        geodesic_distances(sphere, [0], targets=[n])
+    with pytest.raises(BSFError, match="targets must be a 1-D array"):
+        geodesic_distances(sphere, [0], targets=[[0, 1]])
