@@ -392,7 +392,9 @@ def _prepare(source_spectrum, target_spectrum, source_descr, target_descr, k):
         if d.ndim != want or d.shape[:-1] != s[:-1]:
             raise BSFError(f"{name} must have shape {(*s[:-1], 'p')} (one row per vertex of its "
                            f"spectrum), got {np.shape(d)}")
-        if not np.issubdtype(d.dtype, np.number) or not _all_finite(d):
+        # (a NumPy array is checked where it is: _all_finite would copy it into JAX first)
+        if not np.issubdtype(d.dtype, np.number) or not (
+                _all_finite(d) if isinstance(d, jax.Array) else np.all(np.isfinite(d))):
             raise BSFError(f"{name} must be finite numbers (found NaN/inf or a non-numeric dtype)")
         if d.shape[-1] == 0:  # no descriptor term: the map would be fixed by the regularizers
             raise BSFError(f"{name} has zero columns (shape {d.shape}): give at least one "
