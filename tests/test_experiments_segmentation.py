@@ -8,7 +8,8 @@ from bsfjax.experiments import reproduce
 from bsfjax.experiments._datasets import load_dataset
 from bsfjax.experiments.segmentation import (K_SPECTRA, label_metrics,
                                              report, segmentation_experiment,
-                                             segmentation_pair, shape_labels)
+                                             segmentation_pair, shape_labels,
+                                             template_vertices)
 
 from .conftest import DATA, data_path
 
@@ -111,6 +112,29 @@ def test_remeshed_labels_follow_the_template():
     first = np.unique(e.vts, return_index=True)[1]
     np.testing.assert_array_equal(lab[e.vts[first]], template[sid[first]])
     assert lab.shape == (e.n_vertices,) and lab.min() >= 0
+
+
+@pytest.mark.skipif(not (DATA / "faust_5k").exists(), reason="../shared/data/faust_5k absent")
+def test_template_vertices_of_a_remeshed_shape_lie_on_it():
+    """FAUST_5k 000 is a remesh of the registration ``tr_reg_000``: after a similarity fit,
+    each 5K vertex lies near its template vertex on that registration, the vertices no
+    ``.vts`` entry names (filled from their nearest named vertex) too; on a shape of the
+    template's size the map is the identity."""
+    ds = load_dataset(data_path("faust_5k"))
+    e = ds.shapes[0]
+    t = template_vertices(ds, 0, 6890)
+    sid = np.loadtxt(data_path("faust_5k", "corres", "sampleID.vts"), dtype=int) - 1
+    first = np.unique(e.vts, return_index=True)[1]
+    np.testing.assert_array_equal(t[e.vts[first]], sid[first])
+    X, Y = e.mesh.vertices, bj.load_mesh(data_path("faust", "tr_reg_000.off")).vertices[t]
+    mx, my = X.mean(0), Y.mean(0)
+    U, S, Vt = np.linalg.svd((X - mx).T @ (Y - my))
+    fitted = S.sum() / ((X - mx) ** 2).sum() * (X - mx) @ (U @ Vt) + my
+    dist = np.linalg.norm(fitted - Y, axis=1)  # metres; the body is 1.77 m tall
+    unnamed = np.setdiff1d(np.arange(e.n_vertices), e.vts)
+    assert unnamed.size > 1000 and dist.mean() < 0.015 and dist[unnamed].mean() < 0.02
+    reg = load_dataset(data_path("faust"))
+    np.testing.assert_array_equal(template_vertices(reg, 0, 6890), np.arange(6890))
 
 
 def test_fewer_landmarks_are_the_first_of_the_default_ones(tmp_path, monkeypatch):

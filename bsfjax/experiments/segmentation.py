@@ -44,7 +44,7 @@ from .._spectrum import spectrum
 from ._datasets import Dataset
 from ._io import Report, pivot_markdown
 
-__all__ = ["segmentation_experiment", "segmentation_pair", "shape_labels",
+__all__ = ["segmentation_experiment", "segmentation_pair", "shape_labels", "template_vertices",
            "label_metrics", "MAPS", "DEFAULT_MAPS", "METHODS"]
 
 DEFAULT_KS = (30,)
@@ -72,21 +72,30 @@ K_SPECTRA = REFINE_EIGENPAIRS
 
 def shape_labels(dataset: Dataset, index: int, template: np.ndarray) -> np.ndarray:
     """The template labelling on shape ``index`` of ``dataset`` (see the module doc)."""
+    return template[template_vertices(dataset, index, template.size)]
+
+
+def template_vertices(dataset: Dataset, index: int, n_template: int) -> np.ndarray:
+    """The template vertex of each vertex of shape ``index`` (the module doc's labelling, as a
+    point map to the template, or to any registration in its vertex order): the identity on a
+    shape of ``n_template`` vertices; on a remeshed shape, ``sampleID[k]`` at vertex
+    ``vts[k]`` (a vertex listed twice: the first entry) and at any other vertex that of its
+    Euclidean-nearest named vertex."""
     e = dataset.shapes[index]
-    if e.mesh.n_vertices == template.size:
-        return template.copy()
+    if e.mesh.n_vertices == n_template:
+        return np.arange(n_template)
     folder = e.path.parent
     sid_path = next((p for p in (folder / "corres" / "sampleID.vts", folder / "sampleID.vts")
                      if p.is_file()), folder / "corres" / "sampleID.vts")
     if e.vts is None or not sid_path.is_file():
         raise BSFError(f"{e.name}: {e.mesh.n_vertices} vertices, not the template's "
-                       f"{template.size}, and no {sid_path} to name template vertices")
+                       f"{n_template}, and no {sid_path} to name template vertices")
     sid = np.loadtxt(sid_path, dtype=np.int64).ravel() - 1
-    if sid.shape != e.vts.shape or sid.min() < 0 or sid.max() >= template.size:
+    if sid.shape != e.vts.shape or sid.min() < 0 or sid.max() >= n_template:
         raise BSFError(f"{sid_path}: expected {e.vts.size} template indices in [1, "
-                       f"{template.size}]")
+                       f"{n_template}]")
     out = np.full(e.mesh.n_vertices, -1, np.int64)
-    out[e.vts[::-1]] = template[sid[::-1]]  # a vertex listed twice: the first entry wins
+    out[e.vts[::-1]] = sid[::-1]  # a vertex listed twice: the first entry wins
     named = np.flatnonzero(out >= 0)
     miss = out < 0
     if miss.any():
