@@ -149,7 +149,7 @@ def cmd_transfer_many(args, error) -> int:
     landmarks = _read_landmarks_file(args.landmarks_file, targets, error)
     source = load_mesh(args.source)
     from ._cli_io import read_values
-    from .cli import one_start
+    from .cli import TURN_DOUBT, one_start
 
     values, part_names, per_face = read_values(args, source)
     # .json labels come back as .json, triangles' labels as .seg
@@ -191,6 +191,10 @@ def cmd_transfer_many(args, error) -> int:
             continue
         rec = {"target": str(path), "status": "ok", "vertices": res.n_vertices,
                "map_energy": res.map_energy, "seconds": round(res.seconds, 4)}
+        if res.turn_doubtful is not None:
+            rec["turn_doubtful"] = res.turn_doubtful
+            if res.turn_doubtful:
+                tqdm.write(f"bsfjax transfer: {path}: warning: {TURN_DOUBT}", file=sys.stderr)
         # the target mesh, read again only for the coloured mesh or a triangle truth's areas
         target = (load_mesh(path) if mesh_dir is not None or (per_face and args.truth_dir)
                   else None)

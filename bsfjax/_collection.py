@@ -93,6 +93,9 @@ class TargetTransfer(NamedTuple):
     #: this target's host work (reading, eigensolve) plus its share of the time its group's
     #: stages were dispatched and awaited (they run while the next target's eigensolve does)
     seconds: float
+    #: without landmarks, from several starts: ``MapEstimate.turn_doubtful`` of its map (the
+    #: map may be turned front to back); ``None`` otherwise
+    turn_doubtful: bool | None = None
 
 
 # --------------------------------------------------------------------------- host side
@@ -107,6 +110,7 @@ class _Target(NamedTuple):
     samples: Subsample | None  # ZoomOut's
     seconds: float
     p2p: np.ndarray | None = None  # without landmarks: estimate_map's, chosen among starts
+    turn_doubtful: bool | None = None  # and its MapEstimate.turn_doubtful
 
 
 def _as_mesh(target) -> Mesh:
@@ -340,13 +344,15 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
-        p2p = None
+        est = None
         if lm is None and not one_start:  # the choice among starts: estimate_map's own map
-            p2p = estimate_map(src_spec.truncate(k_map), spec.truncate(k_map), k=k,
+            est = estimate_map(src_spec.truncate(k_map), spec.truncate(k_map), k=k,
                                refine_to=k_map, source_mesh=source, target_mesh=mesh,
                                zoomout_samples=None if sub is None else (sub_m, sub),
-                               starts=starts, source_symmetry=source_symmetry()).p2p
-        return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t, p2p)
+                               starts=starts, source_symmetry=source_symmetry())
+        return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
+                       None if est is None else est.p2p,
+                       None if est is None else est.turn_doubtful)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -409,7 +415,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 C=map_to_unit_area(o["C"].astype(np.float64), *tg.factors, inverse=True),
                 map_energy=float(o["energy"]), unassigned_share=share_un,
                 agreement=agree, confidence=conf, regime=regime, n_vertices=n, mass=mass,
-                seconds=tg.seconds + share)
+                seconds=tg.seconds + share, turn_doubtful=tg.turn_doubtful)
 
     targets = list(targets)
     share = process_share(range(len(targets)))

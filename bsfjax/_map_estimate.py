@@ -46,6 +46,14 @@ class MapEstimate(NamedTuple):
     #: with several starts and the turn check: whether the kept map is the alternative with
     #: left and right swapped (the chosen map was turned front to back); ``None`` otherwise
     swapped: bool | None = None
+    #: with the turn check: whether its two measures disagree about which of its two maps is
+    #: turned (the local distortion prefers one, the orientation agreement the other, within
+    #: :data:`bsfjax.ORIENTATION_SLACK` of each other).  The kept map is then a guess and may
+    #: be turned front to back: give two landmark pairs.  On 120 FAUST / FAUST_5k pairs
+    #: without landmarks it was ``True`` on 8, and the kept map was turned on 3 of them (of
+    #: the 5 turned maps kept in all) and partly wrong on 2 (docs/results.md, "The turn
+    #: check").  ``None`` without the check, or on a target too coarse for it
+    turn_doubtful: bool | None = None
 
 
 def _check_landmarks(landmarks, n_m: int, n_n: int):
@@ -146,7 +154,8 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
     landmark pairs ``(x, y)`` off the kept map, estimates with ``(S x, y)`` and the orientation
     term, then once more with landmarks read off that map, and keeps whichever of the two maps
     :func:`bsfjax.choose_map` prefers by local distortion (:data:`TURN_RADIUS`), which a
-    twisted limb raises.
+    twisted limb raises.  Where the orientation agreement prefers the other map, the choice
+    is a guess, and ``MapEstimate.turn_doubtful`` says so.
 
     Args:
         source, target: spectra with at least ``max(k, refine_to)`` eigenpairs.
@@ -283,6 +292,8 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = 30, landmarks=N
             orient = _agreements(source_mesh, target_mesh, both, faces)
             # (a target too coarse for the local distortion keeps the map)
             quality["swapped"] = local is not None and choose_map(local, orient) == 1
+            if local is not None:
+                quality["turn_doubtful"] = _measures_disagree(local, orient)
             if quality["swapped"]:
                 runs = [alt]
                 quality.update(landmarks=alt_landmarks, orientation=float(orient[1]),
@@ -348,6 +359,15 @@ def _descriptors(spectrum: Spectrum, n_energies: int, k0: int, variance: float, 
         return plain
     return jnp.concatenate([plain, wks(spectrum, n_energies, landmarks=landmarks, k=k0,
                                        variance=variance)], axis=1)
+
+
+def _measures_disagree(local, orient) -> bool:
+    """Whether the local distortion and the orientation agreement of the turn check's two maps
+    prefer different maps, both maps within the orientation slack (where :func:`choose_map`
+    goes by the local distortion alone)."""
+    if abs(orient[0] - orient[1]) > ORIENTATION_SLACK:
+        return False
+    return bool((local[0] <= local[1]) != (orient[0] >= orient[1]))
 
 
 def _check_sizes(k, refine_to, km: int) -> int:

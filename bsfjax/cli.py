@@ -143,6 +143,13 @@ def one_start(args, k: int):
     return ((k, WKS_VARIANCE),) if args.one_start else None
 
 
+#: Said when :func:`bsfjax.estimate_map`'s turn check could not tell which of its two maps is
+#: turned front to back (``MapEstimate.turn_doubtful``).
+TURN_DOUBT = ("the map may be turned front to back (left and right swapped): without "
+              "landmarks the turn check's two measures disagree on this pair; give two landmark "
+              "pairs")
+
+
 def _parse_landmarks(text: str | None):
     if text is None:
         return None
@@ -277,6 +284,8 @@ def _transfer_one(args) -> int:
             print(f"no landmarks: kept start k0 = {est.start[0]}, WKS variance "
                   f"{est.start[1]:g}{second}{turn}; geodesic distortion {est.distortion:.4f}, "
                   f"orientation agreement {est.orientation:.1%}", file=sys.stderr)
+            if est.turn_doubtful:
+                warnings.warn(TURN_DOUBT, stacklevel=1)
     common = dict(C=C, p2p=p2p, method=args.method, mesh=source)
     if args.method == "refined":  # its continuation runs on the samples of the map's ZoomOut
         from ._map_estimate import ZOOMOUT_SAMPLES

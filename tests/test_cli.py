@@ -6,12 +6,13 @@ import json
 import re
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
 
 import bsfjax
-from bsfjax.cli import main
+from bsfjax.cli import TURN_DOUBT, main
 
 
 def run(*args):
@@ -285,6 +286,27 @@ def test_example_command_writes_a_pair_that_transfer_reads(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "no landmarks: kept start k0 = " in err and "geodesic distortion" in err
     assert float(err.split("accuracy against")[1].split(":")[1].split("%")[0]) > 90
+
+
+def test_transfer_warns_when_the_turn_check_is_in_doubt(tmp_path, monkeypatch, capsys):
+    """Without landmarks, a map whose turn check is in doubt (``MapEstimate.turn_doubtful``)
+    is said to be possibly turned, with the advice; a map not in doubt is not."""
+    import bsfjax._map_estimate as me
+    d = tmp_path / "ex"
+    assert main(["example", "--out", str(d), "--levels", "2"]) == 0
+    args = ["transfer", str(d / "source.ply"), str(d / "target.ply"), "--labels",
+            str(d / "labels.txt"), "-k", "20", "--out", str(tmp_path / "out.txt")]
+    real = me.estimate_map
+    for doubt in (True, False):
+        monkeypatch.setattr(me, "estimate_map",
+                            lambda *a, **kw: real(*a, **kw)._replace(turn_doubtful=doubt))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            assert main(args) == 0
+        said = [str(w.message) for w in caught if "turned front to back (left and right "
+                "swapped)" in str(w.message)]
+        assert said == ([TURN_DOUBT] if doubt else [])
+        assert "no landmarks: kept start" in capsys.readouterr().err
 
 
 def test_truth_needs_labels_and_the_target_length(cli_files, capsys):

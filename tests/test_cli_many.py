@@ -275,3 +275,23 @@ def test_labels_per_triangle_come_back_per_triangle(files, tmp_path, capsys):
     capsys.readouterr()
     assert main(argv) == 0
     assert "1 complete (skipped), 0 to run" in capsys.readouterr().err
+
+
+def test_summary_says_when_the_turn_check_is_in_doubt(files, tmp_path, monkeypatch, capsys):
+    """Without landmarks and ``--one-start``, each target's map is estimate_map's choice among
+    starts: its turn check's doubt goes into summary.json, and a doubt is said per target."""
+    import bsfjax._collection as coll
+    from bsfjax.cli import TURN_DOUBT
+    real = coll.estimate_map
+    monkeypatch.setattr(coll, "estimate_map",
+                        lambda *a, **kw: real(*a, **kw)._replace(turn_doubtful=True))
+    out = tmp_path / "doubt"
+    argv = [a for a in _argv(files, out, files / "tg" / "t506.ply") if a != "--one-start"]
+    assert main(argv) == 0
+    row = json.loads((out / "summary.json").read_text())["targets"][0]
+    assert row["status"] == "ok" and row["turn_doubtful"] is True
+    assert f"t506.ply: warning: {TURN_DOUBT}" in capsys.readouterr().err
+    # with --one-start there is no turn check, and no entry
+    assert main(_argv(files, tmp_path / "one", files / "tg" / "t506.ply")) == 0
+    row = json.loads((tmp_path / "one" / "summary.json").read_text())["targets"][0]
+    assert "turn_doubtful" not in row

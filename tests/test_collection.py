@@ -172,6 +172,10 @@ def test_one_start_runs_targets_without_landmarks_through_the_batched_stages(col
     chosen = bsfjax.estimate_map(sm.truncate(20), sn.truncate(20), **kw)
     assert chosen.start is not None and not np.array_equal(chosen.p2p, est.p2p)
     np.testing.assert_array_equal(default[0].p2p, chosen.p2p)
+    # the turn check's doubt comes with the chosen map; one start and landmarks have none
+    assert isinstance(chosen.turn_doubtful, bool)
+    assert default[0].turn_doubtful is chosen.turn_doubtful
+    assert one.turn_doubtful is None and default[1].turn_doubtful is None
     with pytest.raises(ValueError, match="k0 must be an integer"):
         next(transfer_collection(small.source, small.labels, targets[:1], k=10,
                                  starts=((0, 7.0),)))

@@ -8,6 +8,9 @@ import pytest
 import bsfjax
 from bsfjax import estimate_map
 from bsfjax._demo import example_landmarks
+from bsfjax._map_estimate import _measures_disagree
+from bsfjax.experiments._datasets import load_dataset
+from bsfjax.experiments.segmentation import shape_labels
 
 from .conftest import data_path, icosphere
 
@@ -155,8 +158,25 @@ def test_estimate_map_turn_check_keeps_what_choose_map_prefers(small_pair):
                                       radius=TURN_RADIUS)
         orient = bsfjax.orientation_agreement(pair.source, pair.target, both)
         assert bsfjax.choose_map(local, orient) == 1
+    # the doubt: the two measures of the kept and the alternative map disagree (known here
+    # only when the alternative was kept; otherwise a bool all the same)
+    assert isinstance(est.turn_doubtful, bool) and without.turn_doubtful is None
+    if est.swapped:
+        assert est.turn_doubtful == _measures_disagree(local, orient)
     one = estimate_map(sm, sn, k=20, refine_to=40, starts=((20, 7.0),), **meshes)
-    assert one.swapped is None
+    assert one.swapped is None and one.turn_doubtful is None
+
+
+def test_measures_disagree_closed_form():
+    """The turn check is in doubt when, within the orientation slack, the map of least local
+    distortion is not the map of best orientation; past the slack orientation alone decides."""
+    from bsfjax._map_estimate import ORIENTATION_SLACK
+    assert not _measures_disagree([0.10, 0.20], [0.95, 0.90])  # both prefer map 0
+    assert not _measures_disagree([0.20, 0.10], [0.90, 0.95])  # both prefer map 1
+    assert _measures_disagree([0.161, 0.157], [0.905, 0.823])  # FAUST 020 -> FAUST_5k 001
+    assert _measures_disagree([0.10, 0.20], [0.90, 0.95])
+    assert not _measures_disagree([0.10, 0.20], [0.90, 0.90 + ORIENTATION_SLACK + 0.01])
+    assert not _measures_disagree([0.10, 0.10], [0.90, 0.90])  # ties: both keep map 0
 
 
 def test_turn_check_keeps_the_map_of_a_target_too_coarse_for_it(small_pair, monkeypatch):
@@ -169,7 +189,7 @@ def test_turn_check_keeps_the_map_of_a_target_too_coarse_for_it(small_pair, monk
     without = estimate_map(sm, sn, turn_check=False, **kw)
     monkeypatch.setattr(hl, "TURN_RADIUS", 1e-9)
     est = estimate_map(sm, sn, **kw)
-    assert est.swapped is False
+    assert est.swapped is False and est.turn_doubtful is None
     np.testing.assert_array_equal(est.p2p, without.p2p)
     with pytest.raises(ValueError, match="turn_check must be True or False"):
         estimate_map(sm, sn, turn_check="yes", **kw)
@@ -197,9 +217,28 @@ def test_turn_check_unturns_a_faust_pair():
     acc = lambda p: np.sum(mass_n * (labels[p] == labels)) / mass_n.sum()  # noqa: E731
     est = estimate_map(sm, sn, **kw)
     assert est.swapped and acc(est.p2p) > 0.9
+    assert est.turn_doubtful is False  # both measures prefer the alternative here
     assert acc(estimate_map(sm, sn, turn_check=False, **kw).p2p) < 0.4
     # the symmetry given (as transfer_collection does) or computed: one map
     np.testing.assert_array_equal(estimate_map(sm, sn, source_symmetry=sym, **kw).p2p, est.p2p)
+
+
+def test_turn_check_says_when_its_measures_disagree():
+    """FAUST 020 → the remeshed FAUST_5k 001 without landmarks: the turn check swaps a right
+    map for a turned one (about a third right), by a local distortion 2 % lower against an
+    orientation agreement 0.08 lower.  It cannot tell, and says so (docs/results.md, "The
+    turn check", stop 39)."""
+    seg = data_path("segmentations", "smpl_vert_segmentation.json")
+    template, _ = bsfjax.load_labels(seg)
+    src = bsfjax.load_mesh(data_path("faust", "tr_reg_020.off"))
+    remeshed = load_dataset(data_path("faust_5k"))
+    j = [e.name for e in remeshed.shapes].index("tr_reg_001")
+    tgt, truth = remeshed.shapes[j].mesh, shape_labels(remeshed, j, template)
+    sm, sn = bsfjax.spectrum(src, 60), bsfjax.spectrum(tgt, 60)
+    est = estimate_map(sm, sn, k=30, refine_to=60, source_mesh=src, target_mesh=tgt)
+    mass = np.asarray(sn.mass)
+    assert est.swapped and est.turn_doubtful is True
+    assert np.sum(mass * (template[est.p2p] == truth)) / mass.sum() < 0.4
 
 
 def test_mirror_symmetry_of_a_shape_with_one_mirror_plane():
