@@ -312,14 +312,15 @@ def cross_triangulations(data: Path, seg: Path, out: Path, cache) -> int:
     """``--cross`` (module doc)."""
     template, _ = bj.load_labels(seg)
     regs, remeshed = load_dataset(data / "faust"), load_dataset(data / "faust_5k")
+    # each remesh's template vertices: its ground-truth map to every registration
     targets = [(b.mesh, bj.spectrum(b.mesh, K_SPECTRA, cache_dir=cache),
-                shape_labels(remeshed, j, template), template_vertices(remeshed, j, template.size))
+                template_vertices(remeshed, j, template.size))
                for j, b in enumerate(remeshed.shapes)]
     rows = []
     for a in regs.shapes:
         sm = bj.spectrum(a.mesh, K_SPECTRA, cache_dir=cache)
-        for b, (mesh, sn, truth, gt) in zip(remeshed.shapes, targets):
-            part = segmentation_pair(sm, sn, (a.mesh, mesh), template, truth, gt,
+        for b, (mesh, sn, gt) in zip(remeshed.shapes, targets):
+            part = segmentation_pair(sm, sn, (a.mesh, mesh), template, template[gt], gt,
                                      methods=("p2p", "refined"),
                                      maps=("default", "no landmarks"), names=(a.name, b.name))
             for r in part:  # (bar_summary's folder: the pair's two folders)
