@@ -252,6 +252,8 @@ print(json.dumps(out))
 
 
 def main() -> None:
+    from bsfjax._files import write_text_atomic
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True)
     ap.add_argument("--quick", action="store_true")
@@ -280,7 +282,7 @@ def main() -> None:
             r = measure(name, src, lab, targets, folder, truth, batch=args.batch)
             rows.append(r)
             print(json.dumps(r), flush=True)
-    (out / "collection.json").write_text(json.dumps(rows, indent=1) + "\n")
+    write_text_atomic(out / "collection.json", json.dumps(rows, indent=1) + "\n")
     lines = ["| set | targets | vertices | one call | separate calls | speed-up | s/target "
              "compiled | s/5K target | compilations | accuracy one / separate | warm "
              "compilation cache: one / separate |",
@@ -296,7 +298,7 @@ def main() -> None:
                      f"{r['compilations_first_pass']} (then {r['compilations_second_pass']}) | "
                      f"{acc} | {r['wall_one_call_warm_cache_s']:.1f} s / "
                      f"{r['wall_separate_calls_warm_cache_s']:.1f} s |")
-    (out / "collection.md").write_text("\n".join(lines) + "\n")
+    write_text_atomic(out / "collection.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

@@ -85,6 +85,7 @@ from pathlib import Path
 import numpy as np
 
 import bsfjax as bj
+from bsfjax._files import write_text_atomic
 from bsfjax._map_estimate import LANDMARK_FREE_STARTS, ORIENT_WEIGHT
 from bsfjax.experiments._datasets import load_dataset
 from bsfjax.experiments._io import write_csv
@@ -134,7 +135,7 @@ def changed_targets(data: Path, seg: Path, out: Path, cache, variants, change, k
         md += [f"# Targets, {key} {variant} ({span} vertices)", "",
                report(part, (30,)).markdown, ""]
     write_csv(rows, out / f"{stem}.csv")
-    (out / f"{stem}.md").write_text("\n".join(md))
+    write_text_atomic(out / f"{stem}.md", "\n".join(md))
     print("\n".join(md))
     return 0
 
@@ -204,7 +205,7 @@ def triangles_report(data: Path, seg: Path, out: Path, cache, repeats: int) -> i
                          f"{np.mean([r['vertices %'] for r in sel]):.2f} | "
                          f"{np.mean([r['triangles %'] for r in sel]):.2f} |")
     md = "\n".join(lines) + "\n\n" + timing + "\n"
-    (out / "segmentation_triangles.md").write_text(md)
+    write_text_atomic(out / "segmentation_triangles.md", md)
     print(md)
     return 0
 
@@ -272,7 +273,8 @@ def no_landmarks_report(rows, data: Path, out: Path, args, tail: str = "") -> in
               f"orientation_bases (one scan per shape, included; {scans[0] / scans[1]:.2f}× "
               f"faster; the same maps); {os.cpu_count()} CPUs, load average {load:.1f}, "
               f"{platform.machine()}.")
-    (out / f"segmentation_nolandmarks{tail}.md").write_text(rep.markdown + "\n\n" + timing + "\n")
+    write_text_atomic(out / f"segmentation_nolandmarks{tail}.md",
+                      rep.markdown + "\n\n" + timing + "\n")
     print(rep.markdown)
     print(timing)
     return 0
@@ -330,7 +332,7 @@ def cross_triangulations(data: Path, seg: Path, out: Path, cache) -> int:
                 f"{r['map']} {r['method']} {r['accuracy']:.2f}" for r in part), file=sys.stderr)
     md = bar_summary(rows) + "\n\n" + report(rows, (30,)).markdown
     write_csv(rows, out / "segmentation_cross.csv")
-    (out / "segmentation_cross.md").write_text(md + "\n")
+    write_text_atomic(out / "segmentation_cross.md", md + "\n")
     print(md)
     return 0
 
@@ -344,7 +346,7 @@ def tables_only(rows, out: Path, stem: str) -> int:
     """The rows' tables alone, as ``stem.csv`` and ``stem.md``."""
     rep = report(rows, (30,))
     write_csv(_without_labels(rows), out / f"{stem}.csv")
-    (out / f"{stem}.md").write_text(rep.markdown + "\n")
+    write_text_atomic(out / f"{stem}.md", rep.markdown + "\n")
     print(rep.markdown)
     return 0
 
@@ -448,7 +450,7 @@ def main(argv=None) -> int:
     if args.all_pairs:
         md = bar_summary(rows)
         write_csv(rows, out / "segmentation_allpairs.csv")
-        (out / "segmentation_allpairs.md").write_text(md + "\n")
+        write_text_atomic(out / "segmentation_allpairs.md", md + "\n")
         print(md)
         return 0
     if args.few_landmarks:
@@ -492,7 +494,7 @@ def main(argv=None) -> int:
               f" ({med['refined, 3 maps on every vertex'] / med['refined']:.2f}× faster than "
               f"the vote on every vertex); {os.cpu_count()} CPUs, load average {load:.1f}, "
               f"{platform.machine()}.")
-    (out / "segmentation_bench.md").write_text(rep.markdown + "\n\n" + timing + "\n")
+    write_text_atomic(out / "segmentation_bench.md", rep.markdown + "\n\n" + timing + "\n")
     print(timing)
     return 0
 
