@@ -76,6 +76,21 @@ def geometric(data: Path, ds, index: int, sample_id: np.ndarray):
     return reg, aligned, nearest, residual
 
 
+_DEFAULT_MAPS: dict = {}
+
+
+def default_map(ds, i: int, j: int, sm, sn):
+    """``(C, p2p)``: pair ``i → j``'s default map as ``bench_segmentation.py`` estimates it (5
+    farthest-point landmarks with their ground-truth images), estimated once per run."""
+    key = (str(ds.shapes[i].path), str(ds.shapes[j].path))
+    if key not in _DEFAULT_MAPS:
+        src, tgt, gt = ds.shapes[i].mesh, ds.shapes[j].mesh, ds.ground_truth(i, j)
+        lm = np.asarray(bj.farthest_point_sampling(src, N_LANDMARKS, seed=0))
+        _DEFAULT_MAPS[key] = _maps(sm, sn, gt, 30, (lm, gt_inverse(gt, lm, tgt, src)),
+                                   (src, tgt), ("default",))["default"]
+    return _DEFAULT_MAPS[key]
+
+
 def remeshed(data: Path, template: np.ndarray, cache: str) -> list[str]:
     ds = load_dataset(data / "faust_5k")
     index = {e.name: i for i, e in enumerate(ds.shapes)}
@@ -93,11 +108,8 @@ def remeshed(data: Path, template: np.ndarray, cache: str) -> list[str]:
         # target vertex -> template vertex -> that vertex on the source registration -> the
         # nearest source 5K vertex (both registrations share the template's vertex order)
         exact = scipy.spatial.cKDTree(pos_m).query(reg_m.vertices[near_n])[1]
-        lm = np.asarray(bj.farthest_point_sampling(ds.shapes[i].mesh, N_LANDMARKS, seed=0))
         gt = ds.ground_truth(i, j)
-        # the benchmark's default map, as bench_segmentation.py estimates it
-        C, p2p = _maps(sm, sn, gt, 30, (lm, gt_inverse(gt, lm, tgt, ds.shapes[i].mesh)),
-                       (ds.shapes[i].mesh, tgt), ("default",))["default"]
+        C, p2p = default_map(ds, i, j, sm, sn)
         cells = []
         for lab_m, lab_n in truth.values():
             acc = [label_metrics(pred, lab_n, mass, tgt)["accuracy"] for pred in (
@@ -150,9 +162,7 @@ def geodesic_vs_labels(data: Path, template: np.ndarray, cache: str) -> list[str
             sm, sn = (bj.spectrum(m, 100, cache_dir=cache) for m in (src, tgt))
             gt = ds.ground_truth(i, j)
             lab_m, lab_n = shape_labels(ds, i, template), shape_labels(ds, j, template)
-            lm = np.asarray(bj.farthest_point_sampling(src, N_LANDMARKS, seed=0))
-            _, p2p = _maps(sm, sn, gt, 30, (lm, gt_inverse(gt, lm, tgt, src)), (src, tgt),
-                           ("default",))["default"]
+            _, p2p = default_map(ds, i, j, sm, sn)
             # "refined" continues on the samples the default map's ZoomOut ran on
             samples = tuple(bj.subsample(m, ZOOMOUT_SAMPLES) for m in (src, tgt))
             last = lambda start: np.asarray(bj.refine_point_maps(  # noqa: E731
