@@ -79,12 +79,13 @@ def geometric(data: Path, ds, index: int, sample_id: np.ndarray):
 _DEFAULT_MAPS: dict = {}
 
 
-def default_map(ds, i: int, j: int, sm, sn):
+def default_map(ds, i: int, j: int, sm, sn, gt):
     """``(C, p2p)``: pair ``i → j``'s default map as ``bench_segmentation.py`` estimates it (5
-    farthest-point landmarks with their ground-truth images), estimated once per run."""
+    farthest-point landmarks with their images under the ground truth ``gt``), estimated once
+    per run."""
     key = (str(ds.shapes[i].path), str(ds.shapes[j].path))
     if key not in _DEFAULT_MAPS:
-        src, tgt, gt = ds.shapes[i].mesh, ds.shapes[j].mesh, ds.ground_truth(i, j)
+        src, tgt = ds.shapes[i].mesh, ds.shapes[j].mesh
         lm = np.asarray(bj.farthest_point_sampling(src, N_LANDMARKS, seed=0))
         _DEFAULT_MAPS[key] = _maps(sm, sn, gt, 30, (lm, gt_inverse(gt, lm, tgt, src)),
                                    (src, tgt), ("default",))["default"]
@@ -109,7 +110,7 @@ def remeshed(data: Path, template: np.ndarray, cache: str) -> list[str]:
         # nearest source 5K vertex (both registrations share the template's vertex order)
         exact = scipy.spatial.cKDTree(pos_m).query(reg_m.vertices[near_n])[1]
         gt = ds.ground_truth(i, j)
-        C, p2p = default_map(ds, i, j, sm, sn)
+        C, p2p = default_map(ds, i, j, sm, sn, gt)
         cells = []
         for lab_m, lab_n in truth.values():
             acc = [label_metrics(pred, lab_n, mass, tgt)["accuracy"] for pred in (
@@ -162,7 +163,7 @@ def geodesic_vs_labels(data: Path, template: np.ndarray, cache: str) -> list[str
             sm, sn = (bj.spectrum(m, 100, cache_dir=cache) for m in (src, tgt))
             gt = ds.ground_truth(i, j)
             lab_m, lab_n = shape_labels(ds, i, template), shape_labels(ds, j, template)
-            _, p2p = default_map(ds, i, j, sm, sn)
+            _, p2p = default_map(ds, i, j, sm, sn, gt)
             # "refined" continues on the samples the default map's ZoomOut ran on
             samples = tuple(bj.subsample(m, ZOOMOUT_SAMPLES) for m in (src, tgt))
             last = lambda start: np.asarray(bj.refine_point_maps(  # noqa: E731
