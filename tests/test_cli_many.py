@@ -278,7 +278,7 @@ def test_labels_per_triangle_come_back_per_triangle(files, tmp_path, capsys):
 
 
 def test_summary_says_when_the_turn_check_is_in_doubt(files, tmp_path, monkeypatch, capsys):
-    """Without landmarks and ``--one-start``, each target's map is estimate_map's choice among
+    """Without landmarks or ``--one-start``, each target's map is estimate_map's choice among
     starts: its turn check's doubt goes into summary.json, and a doubt is said per target."""
     import bsfjax._collection as coll
     from bsfjax.cli import TURN_DOUBT
