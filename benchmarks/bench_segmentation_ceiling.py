@@ -26,12 +26,11 @@ Two questions, answered on the pairs of ``bench_segmentation.py``:
    are a matter of how far the map is off on average, or of which way.
 4. **What true landmarks on the torso buy.**  The default map estimated again with its 5
    landmarks and ``n`` more inside the source's torso parts (hips, spine, spine1, spine2:
-   their farthest points, from the torso vertex nearest the torso's centroid), each with its
-   ground-truth image, for ``n`` in :data:`TORSO_LANDMARKS`: pull-back and ``refined``.  Then
-   whether geodesic distances from those landmarks could tell the registration from the
-   default map: the area-weighted mean over the target's torso of ``|d_N(y, l) − d_M(T(y),
-   l')|`` over the landmark pairs ``(l', l)`` (units of √area), for ``T`` the ground truth
-   and the default map.
+   their farthest points, Euclidean, seed 0), each with its ground-truth image, for ``n`` in
+   :data:`TORSO_LANDMARKS`: pull-back and ``refined``.  Then whether geodesic distances from
+   those landmarks could tell the registration from the default map: the area-weighted mean
+   over the target's torso of ``|d_N(y, l) − d_M(T(y), l')|`` over the landmark pairs
+   ``(l', l)`` (units of √area), for ``T`` the ground truth and the default map.
 
     python benchmarks/bench_segmentation_ceiling.py --out R [--data ../shared/data]
 
@@ -160,10 +159,9 @@ def spectral_ceiling(data: Path, template: np.ndarray, cache: str) -> list[str]:
     return lines
 
 
-def geodesic_vs_labels(data: Path, template: np.ndarray, cache: str) -> list[str]:
-    names = ("default p2p", "refined", "exact 60", "exact 60 adjoint", "exact 100",
-             "exact 100 adjoint", "refined from truth")
-    lines = ["| pair | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+def nine_pairs(data: Path, template: np.ndarray, cache: str):
+    """The 9 pairs of ``bench_segmentation.py``, each as ``(name, ds, i, j, src, tgt, sm, sn,
+    gt, labels_m, labels_n)``: spectra of 100, the ground-truth map and the SMPL labels."""
     for folder, pairs in (("faust", FAUST_PAIRS), ("faust_5k", REMESHED_PAIRS)):
         ds = load_dataset(data / folder)
         index = {e.name: i for i, e in enumerate(ds.shapes)}
@@ -171,38 +169,33 @@ def geodesic_vs_labels(data: Path, template: np.ndarray, cache: str) -> list[str
             i, j = index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]
             src, tgt = ds.shapes[i].mesh, ds.shapes[j].mesh
             sm, sn = (bj.spectrum(m, 100, cache_dir=cache) for m in (src, tgt))
-            gt = ds.ground_truth(i, j)
-            lab_m, lab_n = shape_labels(ds, i, template), shape_labels(ds, j, template)
-            _, p2p = default_map(ds, i, j, sm, sn, gt)
-            # "refined" continues on the samples the default map's ZoomOut ran on
-            samples = tuple(bj.subsample(m, ZOOMOUT_SAMPLES) for m in (src, tgt))
-            last = lambda start: np.asarray(bj.refine_point_maps(  # noqa: E731
-                sm, sn, start, n_keep=1, samples=samples))[-1]
-            maps = [np.asarray(p2p), last(p2p)]
-            for k in (60, 100):
-                C = bj.fmap_from_p2p(sm.truncate(k), sn.truncate(k), gt)
-                maps += [np.asarray(bj.fmap_to_p2p(C, sm.truncate(k), sn.truncate(k),
-                                                   adjoint=adj)) for adj in (False, True)]
-            maps.append(last(gt))
-            err = np.asarray(bj.geodesic_error(src, np.stack(maps), gt))
-            acc = [label_metrics(lab_m[t], lab_n, np.asarray(sn.mass), tgt)["accuracy"]
-                   for t in maps]
-            lines.append(f"| {folder} {a}→{b} | " + " | ".join(
-                f"{100 * e:.2f} / {x:.2f}" for e, x in zip(err, acc)) + " |")
-            print(lines[-1], file=sys.stderr)
+            yield (f"{folder} {a}→{b}", ds, i, j, src, tgt, sm, sn, ds.ground_truth(i, j),
+                   shape_labels(ds, i, template), shape_labels(ds, j, template))
+
+
+def geodesic_vs_labels(data: Path, template: np.ndarray, cache: str) -> list[str]:
+    names = ("default p2p", "refined", "exact 60", "exact 60 adjoint", "exact 100",
+             "exact 100 adjoint", "refined from truth")
+    lines = ["| pair | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for name, ds, i, j, src, tgt, sm, sn, gt, lab_m, lab_n in nine_pairs(data, template, cache):
+        _, p2p = default_map(ds, i, j, sm, sn, gt)
+        # "refined" continues on the samples the default map's ZoomOut ran on
+        samples = tuple(bj.subsample(m, ZOOMOUT_SAMPLES) for m in (src, tgt))
+        last = lambda start: np.asarray(bj.refine_point_maps(  # noqa: E731
+            sm, sn, start, n_keep=1, samples=samples))[-1]
+        maps = [np.asarray(p2p), last(p2p)]
+        for k in (60, 100):
+            C = bj.fmap_from_p2p(sm.truncate(k), sn.truncate(k), gt)
+            maps += [np.asarray(bj.fmap_to_p2p(C, sm.truncate(k), sn.truncate(k),
+                                               adjoint=adj)) for adj in (False, True)]
+        maps.append(last(gt))
+        err = np.asarray(bj.geodesic_error(src, np.stack(maps), gt))
+        acc = [label_metrics(lab_m[t], lab_n, np.asarray(sn.mass), tgt)["accuracy"]
+               for t in maps]
+        lines.append(f"| {name} | " + " | ".join(
+            f"{100 * e:.2f} / {x:.2f}" for e, x in zip(err, acc)) + " |")
+        print(lines[-1], file=sys.stderr)
     return lines
-
-
-def torso_points(vertices: np.ndarray, inside: np.ndarray, n: int) -> np.ndarray:
-    """``n`` farthest points (Euclidean) among the vertices ``inside``, the first the one
-    nearest their centroid."""
-    x = vertices[inside]
-    chosen = [int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1)))]
-    dist = np.linalg.norm(x - x[chosen[0]], axis=1)
-    for _ in range(n - 1):
-        chosen.append(int(dist.argmax()))
-        dist = np.minimum(dist, np.linalg.norm(x - x[chosen[-1]], axis=1))
-    return inside[np.array(chosen)]
 
 
 def torso_landmarks(data: Path, template: np.ndarray, part_names, cache: str) -> list[str]:
@@ -210,41 +203,36 @@ def torso_landmarks(data: Path, template: np.ndarray, part_names, cache: str) ->
     head = [f"+{n} torso: p2p / refined" for n in TORSO_LANDMARKS]
     lines = ["| pair | 5 landmarks: p2p / refined | " + " | ".join(head) + " | torso "
              "distance defect × 100, truth / default |", "|---|---|" + "---|" * len(head) + "---|"]
-    for folder, pairs in (("faust", FAUST_PAIRS), ("faust_5k", REMESHED_PAIRS)):
-        ds = load_dataset(data / folder)
-        index = {e.name: i for i, e in enumerate(ds.shapes)}
-        for a, b in pairs:
-            i, j = index[f"tr_reg_{a}"], index[f"tr_reg_{b}"]
-            src, tgt = ds.shapes[i].mesh, ds.shapes[j].mesh
-            sm, sn = (bj.spectrum(m, 100, cache_dir=cache) for m in (src, tgt))
-            gt, mass = ds.ground_truth(i, j), np.asarray(sn.mass)
-            lab_m, lab_n = shape_labels(ds, i, template), shape_labels(ds, j, template)
-            acc = lambda labels: label_metrics(labels, lab_n, mass, tgt)["accuracy"]  # noqa: E731
-            five = np.asarray(bj.farthest_point_sampling(src, N_LANDMARKS, seed=0))
-            torso = np.flatnonzero(np.isin(lab_m, torso_ids))
-            C, p2p = default_map(ds, i, j, sm, sn, gt)
-            # "refined" continues on the samples each map's ZoomOut ran on, as the CLI's does
-            samples = tuple(bj.subsample(m, ZOOMOUT_SAMPLES) for m in (src, tgt))
-            cells = [(acc(lab_m[np.asarray(p2p)]), acc(bj.transfer_labels(
-                sm, sn, lab_m, C=C, p2p=p2p, samples=samples).labels))]
-            for n in TORSO_LANDMARKS:
-                ls = np.concatenate([five, torso_points(src.vertices, torso, n)])
-                lt = gt_inverse(gt, ls, tgt, src)
-                # the default map's recipe (bsfjax.experiments.segmentation), more landmarks
-                est = bj.estimate_map(sm.truncate(60), sn.truncate(60), k=30, landmarks=(ls, lt),
-                                      refine_to=60, source_mesh=src, target_mesh=tgt)
-                cells.append((acc(lab_m[np.asarray(est.p2p)]), acc(bj.transfer_labels(
-                    sm, sn, lab_m, C=est.C, p2p=est.p2p, samples=est.samples).labels)))
-            # with the last landmarks: how well each map keeps the distances to them
-            d_m = bj.geodesic_distances(src, ls).T / np.sqrt(src.area)
-            d_n = bj.geodesic_distances(tgt, lt).T / np.sqrt(tgt.area)
-            rows = np.flatnonzero(np.isin(lab_n, torso_ids))
-            defect = [float(np.average(np.abs(d_n[rows] - d_m[np.asarray(t)[rows]]).mean(1),
-                                       weights=mass[rows])) for t in (gt, p2p)]
-            lines.append(f"| {folder} {a}→{b} | " + " | ".join(
-                f"{p:.2f} / {r:.2f}" for p, r in cells)
-                + f" | {100 * defect[0]:.3f} / {100 * defect[1]:.3f} |")
-            print(lines[-1], file=sys.stderr)
+    for name, ds, i, j, src, tgt, sm, sn, gt, lab_m, lab_n in nine_pairs(data, template, cache):
+        mass = np.asarray(sn.mass)
+        acc = lambda labels: label_metrics(labels, lab_n, mass, tgt)["accuracy"]  # noqa: E731
+        five = np.asarray(bj.farthest_point_sampling(src, N_LANDMARKS, seed=0))
+        torso = np.flatnonzero(np.isin(lab_m, torso_ids))
+        C, p2p = default_map(ds, i, j, sm, sn, gt)
+        # "refined" continues on the samples each map's ZoomOut ran on, as the CLI's does
+        samples = tuple(bj.subsample(m, ZOOMOUT_SAMPLES) for m in (src, tgt))
+        cells = [(acc(lab_m[np.asarray(p2p)]), acc(bj.transfer_labels(
+            sm, sn, lab_m, C=C, p2p=p2p, samples=samples).labels))]
+        for n in TORSO_LANDMARKS:
+            # the torso's own farthest points (Euclidean, seed 0)
+            ls = np.concatenate([five, torso[bj.farthest_point_sampling(
+                src.vertices[torso], n, seed=0)]])
+            lt = gt_inverse(gt, ls, tgt, src)
+            # the default map's recipe (bsfjax.experiments.segmentation), more landmarks
+            est = bj.estimate_map(sm.truncate(60), sn.truncate(60), k=30, landmarks=(ls, lt),
+                                  refine_to=60, source_mesh=src, target_mesh=tgt)
+            cells.append((acc(lab_m[np.asarray(est.p2p)]), acc(bj.transfer_labels(
+                sm, sn, lab_m, C=est.C, p2p=est.p2p, samples=est.samples).labels)))
+        # with the last landmarks: how well each map keeps the distances to them
+        d_m = bj.geodesic_distances(src, ls).T / np.sqrt(src.area)
+        d_n = bj.geodesic_distances(tgt, lt).T / np.sqrt(tgt.area)
+        rows = np.flatnonzero(np.isin(lab_n, torso_ids))
+        defect = [float(np.average(np.abs(d_n[rows] - d_m[np.asarray(t)[rows]]).mean(1),
+                                   weights=mass[rows])) for t in (gt, p2p)]
+        lines.append(f"| {name} | " + " | ".join(
+            f"{p:.2f} / {r:.2f}" for p, r in cells)
+            + f" | {100 * defect[0]:.3f} / {100 * defect[1]:.3f} |")
+        print(lines[-1], file=sys.stderr)
     return lines
 
 
