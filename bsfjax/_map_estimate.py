@@ -372,22 +372,21 @@ def mirror_symmetry(spectrum: Spectrum, mesh, *, k: int = 30, refine_to: int | N
             fmap_to_p2p(C, spectrum, spectrum, rows=checked))
         return p2p
 
-    fmaps = [estimate((k, WKS_VARIANCE))]
-    maps = at_checked(fmaps[0])[None]
-    kept = _agreements(mesh, mesh, maps, faces)
+    C = estimate((k, WKS_VARIANCE))
+    p2p = at_checked(C)
     extra = [s for s in LANDMARK_FREE_STARTS if s[0] <= refine_to and s != (k, WKS_VARIANCE)]
-    if kept[0] > ORIENTATION_SLACK and extra:  # not a mirror image: every start (docstring)
-        # (one scan over the faces for all of them)
+    if extra and _agreements(mesh, mesh, p2p[None], faces)[0] > ORIENTATION_SLACK:
+        # not a mirror image: every start (docstring), one scan over the faces for them all
         bases = orientation_bases(spectrum, spectrum, mesh, mesh, max(s[0] for s in extra))
-        fmaps += [estimate(s, bases) for s in extra]
+        fmaps = [C] + [estimate(s, bases) for s in extra]
         del bases
-        maps = np.concatenate([maps, np.stack([at_checked(C) for C in fmaps[1:]])])
-        kept = np.concatenate([kept, _agreements(mesh, mesh, maps[1:], faces)])
-        best = choose_map(_distortions(mesh, mesh, maps, DISTORTION_SAMPLES, None), 1.0 - kept)
-        fmaps, maps = [fmaps[best]], maps[best:best + 1]
+        maps = np.stack([p2p] + [at_checked(F) for F in fmaps[1:]])
+        reversal = 1.0 - _agreements(mesh, mesh, maps, faces)
+        best = choose_map(_distortions(mesh, mesh, maps, DISTORTION_SAMPLES, None), reversal)
+        C, p2p = fmaps[best], maps[best]
     if checked is None and rows is None:  # (searched over every vertex already)
-        return maps[0]
-    return np.asarray(fmap_to_p2p(fmaps[0], spectrum, spectrum, rows=rows)).astype(np.int64)
+        return p2p
+    return np.asarray(fmap_to_p2p(C, spectrum, spectrum, rows=rows)).astype(np.int64)
 
 
 def _descriptors(spectrum: Spectrum, n_energies: int, k0: int, variance: float, landmarks):
