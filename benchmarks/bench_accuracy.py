@@ -19,7 +19,7 @@ import json
 import time
 from pathlib import Path
 
-from bsfjax._files import write_text_atomic
+from bsfjax.internal import write_text_atomic
 from bsfjax.experiments import CODERS
 from bsfjax.experiments import load_dataset, pivot_markdown, summarize, transfer_experiment
 

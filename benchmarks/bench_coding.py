@@ -48,7 +48,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
 import bsfjax
-from bsfjax._files import atomic_path
+from bsfjax.internal import atomic_path
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 

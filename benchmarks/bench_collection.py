@@ -252,7 +252,7 @@ print(json.dumps(out))
 
 
 def main() -> None:
-    from bsfjax._files import write_text_atomic
+    from bsfjax.internal import write_text_atomic
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True)

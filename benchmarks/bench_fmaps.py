@@ -245,7 +245,7 @@ def main(argv=None):
         jax.config.update("jax_enable_x64", True)
     from importlib.metadata import version
 
-    from bsfjax._files import write_text_atomic
+    from bsfjax.internal import write_text_atomic
 
     versions = {p: version(p) for p in ("pyfmaps", "jax", "optimistix", "numpy", "scipy")}
     rows = []

@@ -28,7 +28,7 @@ import jax
 import numpy as np
 
 import bsfjax
-from bsfjax._files import atomic_path
+from bsfjax.internal import atomic_path
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 TAUS = (1e-3, 5e-3, 1e-2)
@@ -86,7 +86,7 @@ def main(argv=None):
     t_spec = time.perf_counter() - t0
 
     # FPS (euclidean)
-    n = bsfjax._sampling.n_samples(args.fraction, src.n_vertices)
+    n = bsfjax._sampling._fps.n_samples(args.fraction, src.n_vertices)
     first = int(np.random.default_rng(0).integers(src.n_vertices))
     t_fps_jax, centers = median_time(
         lambda: bsfjax.farthest_point_sampling(src, args.fraction, seed=0), args.repeats)

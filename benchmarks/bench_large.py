@@ -54,8 +54,8 @@ import jax
 import numpy as np
 
 import bsfjax
-from bsfjax._files import write_text_atomic
-from bsfjax._subdivision import subdivide
+from bsfjax.internal import write_text_atomic
+from bsfjax.internal import subdivide
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_coding import random_regions  # noqa: E402

@@ -47,7 +47,7 @@ def one(data: str, levels: int, way: str, cache: str, queue) -> None:
     import numpy as np
 
     import bsfjax
-    import bsfjax._map_estimate as me
+    import bsfjax._maps._estimator as me
     from bench_large import cat_pair
 
     source, target = cat_pair(Path(data), levels)
@@ -110,7 +110,7 @@ def main(argv=None):
                     help="the default only (selection) where the peer would take hours: "
                          "level 2, 445.8K vertices")
     args = ap.parse_args(argv)
-    from bsfjax._files import write_text_atomic
+    from bsfjax.internal import write_text_atomic
 
     rows = run(args.data, args.levels, args.cache, args.ways)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -85,8 +85,8 @@ from pathlib import Path
 import numpy as np
 
 import bsfjax as bj
-from bsfjax._files import write_text_atomic
-from bsfjax._map_estimate import LANDMARK_FREE_STARTS, ORIENT_WEIGHT
+from bsfjax.internal import write_text_atomic
+from bsfjax.internal import LANDMARK_FREE_STARTS, ORIENT_WEIGHT
 from bsfjax.experiments._datasets import load_dataset
 from bsfjax.experiments._io import write_csv
 from bsfjax.experiments.segmentation import (K_SPECTRA, METHODS, report,
@@ -142,7 +142,7 @@ def changed_targets(data: Path, seg: Path, out: Path, cache, variants, change, k
 
 def triangles_report(data: Path, seg: Path, out: Path, cache, repeats: int) -> int:
     """``--triangles`` (module doc)."""
-    from bsfjax._map_estimate import ZOOMOUT_SAMPLES
+    from bsfjax.internal import ZOOMOUT_SAMPLES
     from bsfjax.experiments.segmentation import N_LANDMARKS, _maps, gt_inverse
 
     template, _ = bj.load_labels(seg)

@@ -49,8 +49,8 @@ import scipy.spatial
 
 import bsfjax as bj
 from bsfjax.experiments._datasets import load_dataset
-from bsfjax._files import write_text_atomic
-from bsfjax._map_estimate import ZOOMOUT_SAMPLES
+from bsfjax.internal import write_text_atomic
+from bsfjax.internal import ZOOMOUT_SAMPLES
 from bsfjax.experiments.segmentation import (N_LANDMARKS, _maps, gt_inverse, label_metrics,
                                              shape_labels)
 

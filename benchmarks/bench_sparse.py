@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 import bsfjax
-from bsfjax._files import write_text_atomic
+from bsfjax.internal import write_text_atomic
 from bsfjax.experiments import N_LANDMARKS, _functions, load_dataset, prepare_shapes
 from bsfjax import estimate_map
 

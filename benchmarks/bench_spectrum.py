@@ -36,8 +36,8 @@ import numpy as np
 import scipy.sparse.linalg
 
 import bsfjax
-from bsfjax._files import write_text_atomic
-from bsfjax._subdivision import subdivide
+from bsfjax.internal import write_text_atomic
+from bsfjax.internal import subdivide
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -74,7 +74,7 @@ def large(levels, k, out):
     """The eigensolve on the subdivided TOSCA cat: bsfjax against bare scipy eigsh."""
     import threadpoolctl
 
-    from bsfjax._eigensolver import has_cholmod
+    from bsfjax.internal import has_cholmod
 
     m0 = bsfjax.load_mesh(DATA / "tosca" / "cat" / "cat0.off")
     rows = []

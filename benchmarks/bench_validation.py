@@ -1,8 +1,8 @@
 """Benchmark: the cost of the input checks of issue 8, and a longer reader-fuzzing campaign.
 
 * ``load_mesh`` on the real meshes, split into reading and the defect scan
-  (:func:`bsfjax._mesh.mesh_report`: duplicate vertices/faces, non-manifold edges, components);
-* :func:`bsfjax._mesh.mesh_edges` (1-D int64 keys) against the former
+  (:func:`bsfjax._mesh._mesh.mesh_report`: duplicate vertices/faces, non-manifold edges, components);
+* :func:`bsfjax._mesh._mesh.mesh_edges` (1-D int64 keys) against the former
   ``np.unique(..., axis=0)`` on sorted edge rows (same output, checked);
 * ``--fuzz SECONDS``: mutated OFF/PLY/OBJ/STL files through ``load_mesh`` for that long
   (the same mutations as ``tests/test_fuzz_readers.py``, drawn with ``random``), counting
@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 import bsfjax
-from bsfjax._files import write_text_atomic
-from bsfjax._mesh import mesh_edges, mesh_report
+from bsfjax.internal import write_text_atomic
+from bsfjax.internal import mesh_edges, mesh_report
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_spectrum import median_time  # noqa: E402

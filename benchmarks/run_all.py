@@ -63,8 +63,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg
 
 import bsfjax
-from bsfjax._files import write_text_atomic
-from bsfjax._subdivision import subdivide
+from bsfjax.internal import write_text_atomic
+from bsfjax.internal import subdivide
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_coding import random_regions, rel_residual, sk_lasso, sk_omp  # noqa: E402
@@ -211,7 +211,7 @@ def run_size(suite: Suite, size: str):
 
     # sampling
     first = int(np.random.default_rng(0).integers(n))
-    n_c = bsfjax._sampling.n_samples(FRACTION, n)
+    n_c = bsfjax._sampling._fps.n_samples(FRACTION, n)
     t_ours, centers, _ = timed(lambda: bsfjax.farthest_point_sampling(src_mesh, FRACTION), rep)
     t_np, _, _ = timed(lambda: numpy_fps(V, first, n_c), rep)
     suite.add(size, n, "farthest point sampling 5%", t_ours, "numpy loop", t_np, repeats=rep)
@@ -249,7 +249,7 @@ def run_size(suite: Suite, size: str):
     F32 = F.astype(np.float32)
     eps = (EPS_FRACTION * np.linalg.norm(F, axis=1)) ** 2
     Bd = np.asarray(B_np, np.float64) if dense_peer else None
-    gram_fits = q * q * 8 <= bsfjax._frame.DENSE_BUDGET_BYTES or kind == "Frame"
+    gram_fits = q * q * 8 <= bsfjax._frame._build.DENSE_BUDGET_BYTES or kind == "Frame"
     pf = N_FUNCTIONS if size == "7k" else args.peer_functions
     sub = slice(0, pf)
     factor = N_FUNCTIONS / pf

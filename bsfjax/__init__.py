@@ -27,67 +27,63 @@ owns each step, see ``docs/architecture.md``)::
 
 # the ``bsfjax`` command handles Ctrl-C from here on, before the heavy imports below (a no-op
 # when bsfjax is imported as a library; see _signals)
-from . import _signals
+from ._util import install_sigint_handler
 
-_signals.install()
+install_sigint_handler()
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from ._errors import BSFError, MeshError
+from ._util import BSFError, MeshError
 
 # mesh
 from ._mesh import Mesh, MeshReport, load_mesh, mesh_report
-from ._mesh_write import save_mesh
-from ._example import ExamplePair, example_mesh, example_pair
+from ._mesh import save_mesh
+from ._mesh import ExamplePair, example_mesh, example_pair
 
 # operators and spectrum
-from ._laplacian import laplacian
-from ._spectrum import (Spectrum, interval_spectrum, spectrum, spectrum_from_operators,
-                        stack_spectra)
+from ._spectral import laplacian
+from ._spectral import Spectrum, interval_spectrum, spectrum, spectrum_from_operators, stack_spectra
 
 # sampling
 from ._sampling import Subsample, farthest_point_sampling, subsample
-from ._geodesics import geodesic_distances, geodesic_error
+from ._sampling import geodesic_distances, geodesic_error
 
 # frame
-from ._operator import AbstractFrame
-from ._dense_frame import Frame
-from ._sparse_frame import SparseFrame
+from ._frame import AbstractFrame
+from ._frame import Frame
+from ._frame import SparseFrame
 from ._frame import build_frame, transfer_frame
-from ._frame_tools import adaptive_taus, prune_frame, unique_atoms
+from ._frame import adaptive_taus, prune_frame, unique_atoms
 
 # coding
-from ._coders import AbstractCoder, CodingInfo
-from ._lstsq import LeastSquares
-from ._omp import OMP, ErrorOMP
-from ._lasso import Lasso
-from ._encode import CODERS, as_coder, decode, encode
+from ._coding import AbstractCoder, CodingInfo
+from ._coding import LeastSquares
+from ._coding import OMP, ErrorOMP
+from ._coding import Lasso
+from ._coding import CODERS, as_coder, decode, encode
 
 # transfer
-from ._methods import (BSF, METHODS, AbstractMethod, GeodesicBalls, Pair, ProductBasis,
-                       PullBack, RefinedPullBack, SaturatedHeat, SpectralProjection,
-                       as_method)
+from ._transfer import BSF, METHODS, AbstractMethod, GeodesicBalls, Pair, ProductBasis, PullBack, RefinedPullBack, SaturatedHeat, SpectralProjection, as_method
 from ._transfer import TransferResult, stack_pairs, transfer, transfer_pairs
 
 # functional maps
-from ._descriptors import hks, wks
-from ._fmap import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
-from ._refine import refine_point_maps
-from ._estimation import FmapWeights, estimate_fmap, fmap_energy
-from ._orientation import OrientationBasis, orientation_bases
-from ._distortion import choose_map, map_distortion, orientation_agreement
+from ._maps import hks, wks
+from ._maps import fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
+from ._maps import refine_point_maps
+from ._maps import FmapWeights, estimate_fmap, fmap_energy
+from ._maps import OrientationBasis, orientation_bases
+from ._maps import choose_map, map_distortion, orientation_agreement
 
 # mesh-level entry points
-from ._map_estimate import MapEstimate, estimate_map, mirror_symmetry
-from ._highlevel import REGIMES, LabelTransfer, transfer_labels, transfer_values
-from ._face_labels import (FaceShares, decide_face_labels, face_label_shares,
-                           face_labels_from_vertices, face_scores, transfer_face_labels)
-from ._collection import TargetTransfer, size_bucket, transfer_collection
+from ._maps import MapEstimate, estimate_map, mirror_symmetry
+from ._pipeline import REGIMES, LabelTransfer, transfer_labels, transfer_values
+from ._pipeline import FaceShares, decide_face_labels, face_label_shares, face_labels_from_vertices, face_scores, transfer_face_labels
+from ._pipeline import TargetTransfer, size_bucket, transfer_collection
 
 # metrics and test functions
 from ._metrics import relative_error
-from ._indicators import indicators_to_labels, labels_to_indicators, random_indicators
-from ._label_files import LabelFile, is_face_file, load_labels, save_labels
+from ._metrics import indicators_to_labels, labels_to_indicators, random_indicators
+from ._mesh import LabelFile, is_face_file, load_labels, save_labels
 
 try:
     __version__ = _version("bsfjax")

@@ -18,8 +18,7 @@ import numpy as np
 import pytest
 
 import bsfjax
-from bsfjax import _files
-
+import bsfjax._util._files as _files
 from .conftest import icosphere
 
 PKG = Path(bsfjax.__file__).parent
@@ -126,7 +125,7 @@ def test_corrupt_spectrum_cache_is_recomputed(tmp_path, mesh, corruption):
 
 @pytest.mark.parametrize("suffix, dtype", [(".txt", float), (".npy", float), (".npy", int)])
 def test_cli_output_interrupted(tmp_path, monkeypatch, suffix, dtype):
-    from bsfjax import cli
+    from bsfjax._cli import _io as cli
 
     p = tmp_path / f"out{suffix}"
     cli._write_array(str(p), np.arange(5, dtype=dtype))  # a function, or labels (save_labels)
@@ -207,7 +206,7 @@ def _destination_ok(call: ast.Call, name: str) -> bool:
 def test_every_writer_goes_through_atomic_path():
     """Static check over the package: every serializer call writes to an atomic temp path."""
     offenders, checked = [], 0
-    for path in sorted(PKG.glob("*.py")):
+    for path in sorted(PKG.rglob("*.py")):
         if path.name == "_files.py":
             continue
         tree = ast.parse(path.read_text())
@@ -230,4 +229,4 @@ def test_every_writer_goes_through_atomic_path():
             if not ok:
                 offenders.append(f"{path.name}:{node.lineno}")
     assert checked >= 10  # the scan sees the package's writers (mesh, cache, CLI, results, plots)
-    assert not offenders, f"writes that bypass bsfjax._files.atomic_path: {offenders}"
+    assert not offenders, f"writes that bypass bsfjax._util._files.atomic_path: {offenders}"

@@ -1,4 +1,4 @@
-"""The binarization rule (bsfjax._binarize): blocked binarization, the rule itself and the
+"""The binarization rule (bsfjax._frame._binarize): blocked binarization, the rule itself and the
 effective τ, against float64 numpy references."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from bsfjax._binarize import effective_taus, kernel_mask
+from bsfjax.internal import effective_taus, kernel_mask
 
 from .test_frame import TAUS, assert_atoms_match, build_reference, small  # noqa: F401
 
@@ -18,7 +18,7 @@ from .test_frame import TAUS, assert_atoms_match, build_reference, small  # noqa
 def test_binarize_in_column_blocks_matches_numpy(small, monkeypatch, x64, width):
     """Column blocks of 1, 7 (the last one shifted to end at q = 90) and 89 atoms give the
     float64 reference's atoms, under jit and vmap."""
-    import bsfjax._binarize as frame_mod
+    import bsfjax._frame._binarize as frame_mod
 
     specs, centers = small
     spec = specs[1.0]

@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 import bsfjax
-from bsfjax.cli import TURN_DOUBT, main
+import bsfjax.internal
+from bsfjax.cli import main
+from bsfjax.internal import TURN_DOUBT
 
 
 def run(*args):
@@ -37,7 +39,7 @@ def test_spectrum_command(tmp_path, sphere_mesh, capsys):
 
 
 def test_spectrum_command_method_is_passed_through(tmp_path, sphere_mesh, monkeypatch):
-    import bsfjax._spectrum as spectrum_module
+    import bsfjax._spectral as spectrum_module
 
     mesh_path = tmp_path / "s.ply"
     bsfjax.save_mesh(mesh_path, sphere_mesh)
@@ -191,7 +193,7 @@ def test_transfer_command_function_with_estimated_map(cli_files):
     out = d / "head_out.txt"
     rc = main(["transfer", str(d / "src.ply"), str(d / "tgt.off"), "--function", str(d / "head.txt"),
                "--out", str(out), "-k", "20", "--landmarks", "{0}:{0}".format(
-                   ",".join(str(i) for i in __import__("bsfjax._demo")._demo.example_landmarks(pair)))])
+                   ",".join(str(i) for i in bsfjax.internal.example_landmarks(pair)))])
     assert rc == 0
     got = np.loadtxt(out)
     err = bsfjax.relative_error(f, got, bsfjax.spectrum(pair.target, 5).mass)
@@ -291,7 +293,7 @@ def test_example_command_writes_a_pair_that_transfer_reads(tmp_path, capsys):
 def test_transfer_warns_when_the_turn_check_is_in_doubt(tmp_path, monkeypatch, capsys):
     """Without landmarks, a map whose turn check is in doubt (``MapEstimate.turn_doubtful``)
     is said to be possibly turned, with the advice; a map not in doubt is not."""
-    import bsfjax._map_estimate as me
+    import bsfjax._maps as me
     d = tmp_path / "ex"
     assert main(["example", "--out", str(d), "--levels", "2"]) == 0
     args = ["transfer", str(d / "source.ply"), str(d / "target.ply"), "--labels",

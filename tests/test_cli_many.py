@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import bsfjax
-from bsfjax._highlevel import REGIMES
+from bsfjax.internal import REGIMES
 from bsfjax.cli import main
 
 
@@ -174,8 +174,8 @@ def test_bad_targets_and_landmark_files(files, tmp_path, capsys):
 def test_landmarks_file_maps_names_and_stems_to_targets(tmp_path):
     from pathlib import Path
 
-    from bsfjax._cli_many import _read_landmarks_file
-    from bsfjax.cli import CLIError
+    from bsfjax._cli._many import _read_landmarks_file
+    from bsfjax.internal import CLIError
 
     lm = tmp_path / "lm.json"
     lm.write_text(json.dumps({"b.off": [[1, 2], [3, 4]], "c": [[5], [6]], "other.ply": [[0], [0]]}))
@@ -190,8 +190,8 @@ def test_cluster_detection_and_flags(monkeypatch):
 
     import jax
 
-    from bsfjax._cli_many import _initialize_distributed
-    from bsfjax.cli import CLIError
+    from bsfjax._cli._many import _initialize_distributed
+    from bsfjax.internal import CLIError
 
     calls = []
     monkeypatch.setattr(jax.distributed, "initialize", lambda **kw: calls.append(kw))
@@ -280,8 +280,8 @@ def test_labels_per_triangle_come_back_per_triangle(files, tmp_path, capsys):
 def test_summary_says_when_the_turn_check_is_in_doubt(files, tmp_path, monkeypatch, capsys):
     """Without landmarks or ``--one-start``, each target's map is estimate_map's choice among
     starts: its turn check's doubt goes into summary.json, and a doubt is said per target."""
-    import bsfjax._collection as coll
-    from bsfjax.cli import TURN_DOUBT
+    import bsfjax._pipeline._collection as coll
+    from bsfjax.internal import TURN_DOUBT
     real = coll.estimate_map
     monkeypatch.setattr(coll, "estimate_map",
                         lambda *a, **kw: real(*a, **kw)._replace(turn_doubtful=True))

@@ -8,7 +8,7 @@ import pytest
 
 import bsfjax
 from bsfjax import BSFError, size_bucket, transfer_collection
-from bsfjax._collection import BUCKET_FACTORS
+from bsfjax.internal import BUCKET_FACTORS
 
 
 def test_size_bucket_is_a_small_bounded_set():
@@ -25,7 +25,7 @@ def test_size_bucket_is_a_small_bounded_set():
 
 
 def test_merge_buckets_trades_padding_for_compilations():
-    from bsfjax._buckets import MERGE_PADDING, merge_buckets
+    from bsfjax.internal import MERGE_PADDING, merge_buckets
 
     six = [size_bucket(n) for n in (6890, 6201, 5512, 4823, 4134, 3446)]
     assert set(merge_buckets(six).values()) == {8192}  # the issue's six targets: one size
@@ -44,7 +44,7 @@ def test_merge_buckets_trades_padding_for_compilations():
 def test_merged_buckets_give_the_unpadded_results():
     """Two targets in two buckets (512, 2048) of a small collection are computed in one
     (2048 vertices, the larger face bucket): the same point maps and labels as unpadded."""
-    from bsfjax._collection import _merged_sizes
+    from bsfjax._pipeline._collection import _merged_sizes
 
     small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
     targets = [small.target, large.target]
@@ -62,8 +62,7 @@ def test_merged_buckets_give_the_unpadded_results():
 def test_each_target_file_is_read_once(tmp_path, monkeypatch):
     """The size scan's meshes serve the run: one read per target file, the same results as
     targets given as meshes."""
-    from bsfjax import _collection
-
+    import bsfjax._pipeline._collection as _collection
     small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
     paths = [tmp_path / "a.off", tmp_path / "b.off"]
     for path, mesh in zip(paths, (small.target, large.target)):
@@ -287,7 +286,8 @@ def test_host_work_overlaps_the_stages_on_one_blas_thread(monkeypatch):
     the group instead and keeps the default threads.  Either way the results are the same."""
     from threadpoolctl import threadpool_info
 
-    from bsfjax import _collection, _threads
+    import bsfjax._pipeline._collection as _collection
+    import bsfjax._util._threads as _threads
 
     small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
     targets = [small.target, large.target, small.target]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import bsfjax
-from bsfjax._demo import example_landmarks, format_table, run_demo
+from bsfjax.internal import example_landmarks, format_table, run_demo
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import pytest
 
 import bsfjax
 from bsfjax import BSFError, hks, wks
-from bsfjax._descriptors import hks_times, wks_energies
+from bsfjax.internal import hks_times, wks_energies
 
 from .conftest import icosphere
 

@@ -167,8 +167,7 @@ def test_shared_geodesics_equal_fresh_dijkstra_and_run_each_vertex_once(sphere, 
     """_Geodesics (estimate_map's distortions share one per shape) answers overlapping,
     unordered, repeated vertex sets as Dijkstra from scratch does, running it from each vertex
     once; and a distortion through it equals map_distortion's."""
-    from bsfjax import _distortion
-
+    import bsfjax._maps._distortion as _distortion
     mesh, mirror = sphere
     runs = []
     real = _distortion.geodesic_distances

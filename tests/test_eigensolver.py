@@ -1,4 +1,4 @@
-"""The block shift-invert Lanczos eigensolver (``bsfjax._eigensolver``) and the ``method``
+"""The block shift-invert Lanczos eigensolver (``bsfjax._spectral._eigensolver``) and the ``method``
 option of ``spectrum`` / ``spectrum_from_operators``: closed forms, dense LAPACK and ARPACK
 references, both linear-solver backends, breakdown, non-convergence and the cache key."""
 
@@ -13,9 +13,9 @@ import scipy.sparse as sp
 
 import bsfjax
 from bsfjax import BSFError
-from bsfjax._eigensolver import ORTH_LEVEL, MissedEigenvalue, _cholqr, _orthonormalize, \
+from bsfjax._spectral._eigensolver import ORTH_LEVEL, MissedEigenvalue, _cholqr, _orthonormalize, \
     _rotate_in_place, block_lanczos, factorize, has_cholmod
-from bsfjax._spectrum import interval_operators
+from bsfjax.internal import interval_operators
 
 from .conftest import icosphere
 
@@ -179,7 +179,7 @@ def test_cholqr_and_in_place_rotation():
 def test_probe_gets_the_rayleigh_block_from_the_krylov_relation(monkeypatch):
     # the probe's Yᵀ K Y comes from the Krylov relation (Λ − (Yᵀ (K − σ) Q_new) G Θ⁻¹), not
     # from K applied to all of Y: it must equal the direct product to rounding
-    import bsfjax._eigensolver as E
+    import bsfjax._spectral._eigensolver as E
     seen = {}
     probe = E._missed_eigenvalues
 
@@ -201,7 +201,7 @@ def test_probe_gets_the_rayleigh_block_from_the_krylov_relation(monkeypatch):
 def test_failed_confirmation_restarts_from_the_ritz_vectors(monkeypatch):
     # the confirmation writes the Ritz vectors over the basis; if the true residuals fail,
     # that is a thick restart keeping k vectors, and the solver goes on to the same pairs
-    import bsfjax._eigensolver as E
+    import bsfjax._spectral._eigensolver as E
     W, a = interval_operators(1500)
     lam0, phi0, info0 = block_lanczos(W, a, 16, _sigma(W, a))
     calls = []
@@ -226,7 +226,7 @@ def test_mapped_basis_and_released_tail():
     # kept are intact, also when they end inside a page
     import mmap
 
-    from bsfjax._eigensolver import _mapped_empty, _release_after
+    from bsfjax._spectral._eigensolver import _mapped_empty, _release_after
     n, m, k = 1000, 12, 5
     Q, buf = _mapped_empty(n, m)
     assert Q.shape == (n, m) and Q.flags.f_contiguous and Q.flags.writeable
@@ -257,7 +257,7 @@ def test_errors_are_clear():
 def test_method_option_and_cache_key(tmp_path, sphere3):
     with pytest.raises(BSFError, match="method must be one of"):
         bsfjax.spectrum(sphere3, 5, method=3)
-    spec_mod = __import__("bsfjax._spectrum", fromlist=["x"])
+    spec_mod = __import__("bsfjax._spectral._spectrum", fromlist=["x"])
     assert spec_mod._resolve_method("auto", 500, 10) == "dense"
     assert spec_mod._resolve_method("auto", 5000, 10) == "lanczos"  # ARPACK is faster there
     assert spec_mod._resolve_method("auto", 50_000, 10) == ("block" if has_cholmod() else "lanczos")
@@ -284,7 +284,7 @@ def test_auto_falls_back_silently(sphere3, monkeypatch):
     """Where ``"auto"`` picks the block solver and it fails (here made to fail, as it does on a
     multiplicity above its block), ``"auto"`` goes on with ARPACK without a warning: the user
     chose no solver.  The spectrum is ARPACK's; a solver the user named warns."""
-    spec_mod = __import__("bsfjax._spectrum", fromlist=["x"])
+    spec_mod = __import__("bsfjax._spectral._spectrum", fromlist=["x"])
 
     def fails(*args, **kwargs):
         raise MissedEigenvalue("missed 1 eigenvalue")

@@ -176,13 +176,13 @@ def test_orientation_term_matches_dense_least_squares(orientation):
 def test_orientation_operator(small):
     """O^f = Φᵀ W_f Φ; ⟨n × ∇f, ∇f⟩ = 0 on every face, so O^f kills f's own coefficients."""
     (m0, _, _), (s0, _, _), _ = small
-    from bsfjax._orientation import _geometry, _orient_ops
+    from bsfjax._maps._orientation import face_geometry, _orient_ops
 
     coef = np.random.default_rng(0).standard_normal((30, 2))
     f, g = (s0.evecs @ coef).T  # band-limited: exactly represented by their coefficients
     with jax.enable_x64(True):
         ops = np.asarray(_orient_ops(jnp.asarray(s0.evecs), jax.tree.map(jnp.asarray,
-                                     _geometry(m0)), jnp.asarray(np.stack([f, g], 1))))
+                                     face_geometry(m0)), jnp.asarray(np.stack([f, g], 1))))
     assert ops.shape == (2, 30, 30)
     np.testing.assert_allclose(ops[0] @ coef[:, 0], 0.0, atol=1e-10 * np.abs(ops[0]).max())
     assert np.abs(ops[0] @ coef[:, 1]).max() > 1e-2 * np.abs(ops[0]).max()

@@ -12,9 +12,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 import bsfjax
-from bsfjax._errors import BSFError
-from bsfjax._example import JOINTS, LABEL_NAMES, POSES, example_mesh, example_pair
-from bsfjax._mesh import Mesh, clean_mesh
+from bsfjax.internal import BSFError
+from bsfjax.internal import JOINTS, LABEL_NAMES, POSES, example_mesh, example_pair
+from bsfjax.internal import Mesh, clean_mesh
 
 
 @pytest.fixture(scope="module")

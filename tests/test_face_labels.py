@@ -1,4 +1,4 @@
-"""Segmentations given per triangle (bsfjax._face_labels): shares, decision, transfer."""
+"""Segmentations given per triangle (bsfjax._pipeline._face_labels): shares, decision, transfer."""
 
 from __future__ import annotations
 

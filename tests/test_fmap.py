@@ -152,7 +152,7 @@ def test_padded_queries_are_skipped(n_valid):
     """``_nearest(..., n_valid)`` (a target padded to its size bucket): the real queries get
     cKDTree's answers, every chunk past them is skipped (answer 0), jitted with ``n_valid``
     traced (one program for every count)."""
-    from bsfjax._fmap import _nearest
+    from bsfjax._maps._fmap import _nearest
 
     rng = np.random.default_rng(3)
     ref = rng.standard_normal((900, 12))

@@ -8,7 +8,7 @@ import pytest
 
 import bsfjax
 from bsfjax import estimate_map, transfer_labels, transfer_values
-from bsfjax._demo import example_landmarks
+from bsfjax.internal import example_landmarks
 
 
 def test_estimate_map_and_label_transfer(small_pair):
@@ -51,7 +51,7 @@ def test_transfer_labels_refined_default_reports_its_regime(small_pair):
     pair, sm, sn = small_pair
     gt = np.asarray(pair.p2p)
     res = transfer_labels(sm, sn, pair.labels, p2p=gt)  # default method: "refined"
-    assert res.regime in bsfjax._highlevel.REGIMES and res.unassigned_share == 0.0
+    assert res.regime in bsfjax._pipeline._mesh_level.REGIMES and res.unassigned_share == 0.0
     assert 0.9 < res.confidence <= 1.0 + 1e-6
     mass = np.asarray(sn.mass)
     assert res.agreement == pytest.approx(np.sum(mass * (res.labels == pair.labels)) / mass.sum())

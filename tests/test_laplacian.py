@@ -8,7 +8,7 @@ import scipy.sparse as sp
 
 import bsfjax
 from bsfjax import Mesh, MeshError
-from bsfjax._laplacian import cotangent_stiffness, mass_matrix
+from bsfjax.internal import cotangent_stiffness, mass_matrix
 
 from .conftest import data_path, icosphere
 

@@ -57,7 +57,7 @@ def test_gram_float64_binary_fast_path_is_exact():
     W = B * np.linspace(0.5, 1.5, 300)[:, None]  # not 0/1: the float64 GEMM
     with jax.enable_x64(True):
         for X in (B, W):
-            G = jax.jit(bsfjax._dense_frame.dense_gram)(jnp.asarray(X))
+            G = jax.jit(bsfjax._frame._dense_frame.dense_gram)(jnp.asarray(X))
             assert G.dtype == jnp.float64
             np.testing.assert_allclose(G, X.T @ X, rtol=1e-14, atol=0)
 

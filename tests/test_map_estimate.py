@@ -7,8 +7,8 @@ import pytest
 
 import bsfjax
 from bsfjax import estimate_map
-from bsfjax._demo import example_landmarks
-from bsfjax._map_estimate import _measures_disagree
+from bsfjax.internal import example_landmarks
+from bsfjax._maps._estimator import _measures_disagree
 from bsfjax.experiments._datasets import load_dataset
 from bsfjax.experiments.segmentation import shape_labels
 
@@ -141,7 +141,7 @@ def test_estimate_map_turn_check_keeps_what_choose_map_prefers(small_pair):
     """The turn check keeps the map without it, or an alternative that ``choose_map`` prefers
     to it by local distortion (at TURN_RADIUS on TURN_SAMPLES samples) and orientation; with
     landmarks or one start it does not run; a non-bool is named."""
-    from bsfjax._map_estimate import TURN_RADIUS, TURN_SAMPLES
+    from bsfjax.internal import TURN_RADIUS, TURN_SAMPLES
     pair, sm, sn = small_pair
     meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
     starts = ((10, 3.5), (20, 7.0))
@@ -170,7 +170,7 @@ def test_estimate_map_turn_check_keeps_what_choose_map_prefers(small_pair):
 def test_measures_disagree_closed_form():
     """The turn check is in doubt when, within the orientation slack, the map of least local
     distortion is not the map of best orientation; past the slack orientation alone decides."""
-    from bsfjax._map_estimate import ORIENTATION_SLACK
+    from bsfjax.internal import ORIENTATION_SLACK
     assert not _measures_disagree([0.10, 0.20], [0.95, 0.90])  # both prefer map 0
     assert not _measures_disagree([0.20, 0.10], [0.90, 0.95])  # both prefer map 1
     assert _measures_disagree([0.161, 0.157], [0.905, 0.823])  # FAUST 020 -> FAUST_5k 001
@@ -182,7 +182,7 @@ def test_measures_disagree_closed_form():
 def test_turn_check_keeps_the_map_of_a_target_too_coarse_for_it(small_pair, monkeypatch):
     """No two target samples closer than the radius (here: a radius below every edge): no
     local distortion to compare, so the map without the check is kept, not an error."""
-    import bsfjax._map_estimate as hl
+    import bsfjax._maps._estimator as hl
     pair, sm, sn = small_pair
     kw = dict(k=20, refine_to=40, starts=((10, 3.5), (20, 7.0)), source_mesh=pair.source,
               target_mesh=pair.target)
@@ -246,7 +246,7 @@ def test_mirror_symmetry_tries_every_start_when_one_keeps_the_orientation(monkey
     (it keeps the orientation on about a third of the area, and maps most SMPL parts onto
     themselves).  Then every start is tried, and the one kept maps each part to its mirror
     part."""
-    import bsfjax._map_estimate as me
+    import bsfjax._maps._estimator as me
 
     seg = data_path("segmentations", "smpl_vert_segmentation.json")
     mesh = bsfjax.load_mesh(data_path("faust", "tr_reg_002.off"))
@@ -304,7 +304,7 @@ def test_estimate_map_on_a_large_target_compares_its_candidates_on_part_of_it(sm
     whole map again (the same result as the full comparison); with a quarter of the faces the
     same start is kept and its map is then searched over every vertex, and the landmarks read
     off a candidate are target vertices that were searched."""
-    import bsfjax._map_estimate as me
+    import bsfjax._maps._estimator as me
     pair, sm, sn = small_pair
     kw = dict(k=20, refine_to=40, starts=((10, 3.5), (20, 7.0), (30, 14.0)),
               source_mesh=pair.source, target_mesh=pair.target)
@@ -332,7 +332,7 @@ def test_estimate_map_on_a_large_target_compares_its_candidates_on_part_of_it(sm
 def test_landmarks_read_off_a_map_skip_the_vertices_not_searched(small_pair):
     """``-1`` entries (target vertices not searched) are never read as landmarks: each source
     landmark takes the searched target vertex whose image is nearest to it."""
-    from bsfjax._map_estimate import _landmarks_from_map
+    from bsfjax._maps._estimator import _landmarks_from_map
     pair, _, _ = small_pair
     gt = np.asarray(pair.p2p).astype(np.int64)
     part = gt.copy()

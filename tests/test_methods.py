@@ -9,7 +9,7 @@ import pytest
 import bsfjax
 from bsfjax import BSFError
 from bsfjax import BSF, LeastSquares, Pair, transfer
-from bsfjax._methods import METHODS, geodesic_ball_radii, product_basis
+from bsfjax.internal import METHODS, geodesic_ball_radii, product_basis
 
 from .conftest import icosphere
 

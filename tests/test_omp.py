@@ -118,7 +118,7 @@ def test_omp_chunked_batches_equal_one_chunk(method, monkeypatch):
     opts = {"sparsity": 6} if method == "omp" else {"eps": 0.2 * np.sum(F * F, 1), "max_atoms": 6}
     with jax.enable_x64(True):
         whole, info_w = encode(B, F, method, return_info=True, **opts)
-        monkeypatch.setattr(bsfjax._omp, "_OMP_CHUNK_ELEMS", 3 * 6 * 40)  # chunks of 3
+        monkeypatch.setattr(bsfjax._coding._omp, "_OMP_CHUNK_ELEMS", 3 * 6 * 40)  # chunks of 3
         chunked, info_c = encode(B, F, method, return_info=True, **opts)
     np.testing.assert_allclose(chunked, whole, rtol=0, atol=1e-12)
     for a, b in zip(info_c, info_w):

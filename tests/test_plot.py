@@ -14,10 +14,11 @@ from matplotlib.image import imread
 from scipy.spatial import ConvexHull
 
 from bsfjax import plot
-from bsfjax._errors import BSFError
-from bsfjax._example import example_mesh, example_pair
-from bsfjax._mesh import Mesh
-from bsfjax._spectrum import interval_spectrum
+from bsfjax.internal import label_colour
+from bsfjax.internal import BSFError
+from bsfjax.internal import example_mesh, example_pair
+from bsfjax.internal import Mesh
+from bsfjax.internal import interval_spectrum
 
 
 @pytest.fixture(scope="module")
@@ -174,7 +175,7 @@ def test_plot_segmentation_colours(pair, tmp_path):
     # flat shading scales a colour, so every label's chromaticity must appear in the image
     chroma = _chroma(rgb).reshape(-1, 3)
     for l in range(6):
-        c = plot._label_colour(np.array([l]))[0]
+        c = label_colour(np.array([l]))[0]
         assert np.min(np.abs(chroma - _chroma(c)).max(-1)) < 0.01, l
     # unassigned: shaded grey pixels (equal channels, darker than the white background)
     flat = rgb.reshape(-1, 3)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import bsfjax as bj
-from bsfjax._refine import refinement_sizes
+from bsfjax.internal import refinement_sizes
 
 K = 40
 

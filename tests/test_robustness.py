@@ -23,7 +23,7 @@ import pytest
 
 import bsfjax
 from bsfjax import BSFError, MeshError
-from bsfjax._mesh import clean_mesh, mesh_report
+from bsfjax.internal import clean_mesh, mesh_report
 
 from .conftest import icosphere
 
@@ -483,10 +483,10 @@ def test_mesh_report_counts(tmp_path):
 
 
 @pytest.mark.parametrize("target,call", [
-    ("bsfjax._frame._build_core", lambda s: bsfjax.build_frame(s.spec, [99])),
-    ("bsfjax._encode._encode_batch", lambda s: bsfjax.encode(s.frame, s.F * np.nan)),
+    ("bsfjax._frame._build._build_core", lambda s: bsfjax.build_frame(s.spec, [99])),
+    ("bsfjax._coding._encode._encode_batch", lambda s: bsfjax.encode(s.frame, s.F * np.nan)),
     ("bsfjax._metrics._relative_error", lambda s: bsfjax.relative_error(s.F, s.F, -s.spec.mass)),
-    ("bsfjax._fmap._fmap_to_p2p_jit", lambda s: bsfjax.fmap_to_p2p(np.eye(5) * np.inf, s.spec,
+    ("bsfjax._maps._fmap._fmap_to_p2p_jit", lambda s: bsfjax.fmap_to_p2p(np.eye(5) * np.inf, s.spec,
                                                                  s.spec)),
 ])
 def test_errors_come_before_tracing(ns, monkeypatch, target, call):
@@ -599,8 +599,9 @@ def test_cli_bad_input_one_line_status_2_nothing_written(tmp_path, capsys, ns, c
 def test_cli_outputs_all_or_none(tmp_path, capsys, ns, monkeypatch):
     """The second output fails after the first was written: neither is left, the message
     names the user's path (not the temporary file), and an existing file keeps its content."""
+    import bsfjax._cli._transfer as cli_transfer
     from bsfjax import cli
-    from bsfjax._files import atomic_path
+    from bsfjax.internal import atomic_path
 
     files = _cli_files(tmp_path, ns)
     old = tmp_path / "m.ply"
@@ -611,7 +612,7 @@ def test_cli_outputs_all_or_none(tmp_path, capsys, ns, monkeypatch):
             tmp.write_text("partial")
             raise OSError(28, "No space left on device", str(tmp))
 
-    monkeypatch.setattr(cli, "_write_array", failing_write)
+    monkeypatch.setattr(cli_transfer, "_write_array", failing_write)
     argv = _transfer(files, "--map", "p2p", files["lab"].replace("lab", "p2p"),
                      "--mesh-out", str(old), "--method", "std")
     np.savetxt(files["lab"].replace("lab", "p2p"), np.arange(ns.n), fmt="%d")

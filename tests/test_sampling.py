@@ -9,7 +9,7 @@ import scipy.sparse.csgraph
 
 import bsfjax
 from bsfjax import BSFError, farthest_point_sampling
-from bsfjax._mesh import edge_graph
+from bsfjax.internal import edge_graph
 
 from .conftest import icosphere
 
@@ -63,7 +63,7 @@ def test_euclidean_matches_numpy_x64(cloud, seed, n):
 def test_pruned_euclidean_matches_numpy(cloud, monkeypatch, seed, n):
     """Above PRUNED_FPS_MIN_POINTS the k-d-tree pruned loop runs (float64 in any mode): the
     textbook picks, all the way to n = N."""
-    import bsfjax._sampling as sampling
+    import bsfjax._sampling._fps as sampling
 
     calls = []
     orig = sampling._fps_pruned
@@ -79,7 +79,7 @@ def test_pruned_euclidean_ties_and_duplicates():
     once all distinct points are taken the picks repeat as the full-pass loop's do."""
     g = np.stack(np.meshgrid(np.arange(6.0), np.arange(5.0), indexing="ij"), -1).reshape(-1, 2)
     pts = np.concatenate([g, g])
-    import bsfjax._sampling as sampling
+    import bsfjax._sampling._fps as sampling
 
     want = fps_reference(euclid(pts), len(pts), 45, seed=0)
     np.testing.assert_array_equal(sampling._fps_pruned(pts, int(want[0]), 45), want)

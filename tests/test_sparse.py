@@ -11,7 +11,7 @@ import pytest
 import bsfjax
 from bsfjax import BSFError, Frame, build_frame, decode, encode, transfer_frame
 from bsfjax import BSF, Pair, transfer
-from bsfjax._frame import ADAPTIVE_N_SCALES
+from bsfjax.internal import ADAPTIVE_N_SCALES
 
 from .conftest import data_path, icosphere
 

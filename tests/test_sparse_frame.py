@@ -10,8 +10,8 @@ import scipy.sparse as sp
 
 import bsfjax
 from bsfjax import BSFError, SparseFrame, build_frame, decode, encode, transfer_frame
-import bsfjax._frame as frame_mod
-from bsfjax._sparse_frame import ell_matmul, ell_rmatmul, sparse_atoms, sparse_gram
+import bsfjax._frame._build as frame_mod
+from bsfjax.internal import ell_matmul, ell_rmatmul, sparse_atoms, sparse_gram
 
 from .conftest import data_path, icosphere
 
@@ -155,7 +155,7 @@ def test_automatic_choice_and_errors(pair, monkeypatch):
     assert isinstance(build_frame(src, centers, sparse=False), bsfjax.Frame)
     monkeypatch.setattr(frame_mod, "DENSE_BUDGET_BYTES", 4 * src.n_vertices * 3 * len(centers))
     assert isinstance(build_frame(src, centers), bsfjax.Frame)
-    import bsfjax._operator as operator_mod
+    import bsfjax._frame._operator as operator_mod
 
     monkeypatch.setattr(operator_mod, "DENSE_BUDGET_BYTES", 8)
     F = np.ones((1, src.n_vertices))
@@ -193,7 +193,7 @@ def test_faust_sparse_build_matches_dense():
 def test_dense_omp_host_gram_rows_match_the_gemm(pair, monkeypatch):
     """A concrete binary frame coding a large batch takes its Gram rows from a host CSR copy
     (precompute="auto"); the codes equal the full-Gram GEMM path."""
-    import bsfjax._gram_rows as coding
+    import bsfjax._frame._gram_rows as coding
 
     _, _, _, dense, _, _ = pair
     F = (np.random.default_rng(4).random((40, dense.n_vertices)) < 0.4).astype(np.float32)
@@ -216,7 +216,7 @@ def test_host_gram_rows_are_computed_once_per_atom(pair, monkeypatch):
     """Within one encode call each selected atom's Gram row is computed on the host once, however
     many functions select it; with the row budget exhausted (nothing kept) the codes are the
     same."""
-    import bsfjax._gram_rows as coding
+    import bsfjax._frame._gram_rows as coding
 
     _, _, _, dense, sparse, _ = pair
     F = (np.random.default_rng(5).random((30, dense.n_vertices)) < 0.3).astype(np.float32)
@@ -246,7 +246,7 @@ def test_host_gram_rows_are_computed_once_per_atom(pair, monkeypatch):
 def test_build_in_many_column_blocks(pair, monkeypatch):
     """Blocks of 7 atoms (the last one padded), lists in 5 vertex chunks grown one slot at a
     time: the same lists as one block."""
-    import bsfjax._sparse_frame as sf_mod
+    import bsfjax._frame._sparse_frame as sf_mod
 
     src, _, _, dense, sparse, _ = pair
     monkeypatch.setattr(sf_mod, "_BUILD_ELEMS", 7 * src.n_vertices)
@@ -272,7 +272,7 @@ def _random_lists(rng, n, q, density):
 def test_list_builder_appends_in_chunks(monkeypatch):
     """Appending atoms block by block into vertex chunks (uneven last chunk, growth by one slot,
     vertices with no atoms) gives the sorted padded lists, 64-byte aligned."""
-    import bsfjax._sparse_frame as sf_mod
+    import bsfjax._frame._sparse_frame as sf_mod
 
     rng = np.random.default_rng(1)
     n, q = 83, 41
@@ -294,7 +294,7 @@ def test_list_builder_appends_in_chunks(monkeypatch):
 def test_products_in_overlapping_blocks(monkeypatch):
     """Blocks that do not divide n (the last one moved back over its predecessor): every row is
     counted once in B X, Bᵀ Y and nnz; integer data, so the sums are exact."""
-    import bsfjax._sparse_frame as sf_mod
+    import bsfjax._frame._sparse_frame as sf_mod
 
     rng = np.random.default_rng(2)
     n, q, m = 61, 29, 3
@@ -318,7 +318,7 @@ def test_products_in_overlapping_blocks(monkeypatch):
 def test_atom_vertices_is_the_scipy_transpose(monkeypatch):
     """The chunked counting-sort transpose equals scipy's CSC of B (indptr and sorted vertex
     indices), for one chunk, for chunks of a few rows, and with panels of 8 vertices."""
-    import bsfjax._sparse_frame as sf_mod
+    import bsfjax._frame._sparse_frame as sf_mod
 
     rng = np.random.default_rng(3)
     n, q = 70, 37
@@ -339,7 +339,7 @@ def test_ell_gram_rows_equal_the_csr_product(monkeypatch):
     """Gram rows from the lists and their transpose equal scipy's ``(√w B)ᵀ (√w B)`` rows and
     column norms: bitwise (same products, same order) in one chunk; counts exactly and weighted
     rows to rounding when an atom's vertices are split over chunks."""
-    import bsfjax._sparse_frame as sf_mod
+    import bsfjax._frame._sparse_frame as sf_mod
 
     rng = np.random.default_rng(4)
     n, q = 90, 33
@@ -401,11 +401,11 @@ def test_sparse_frames_with_the_adaptive_and_hygiene_options(pair):
 
 
 def test_packed_lists_beyond_16_bits(monkeypatch):
-    """q ≥ 2¹⁶: 16-bit lists with per-vertex segment starts (bsfjax._packed_lists) give the
+    """q ≥ 2¹⁶: 16-bit lists with per-vertex segment starts (bsfjax._frame._packed_lists) give the
     int32 lists' products, counts, transpose, Gram rows, columns and pull-back; the builder
     packs them as the atoms arrive (blocks straddling 2¹⁶ and 2·2¹⁶)."""
-    import bsfjax._sparse_frame as sf_mod
-    from bsfjax._packed_lists import decode_host, decode_traced, pack_lists
+    import bsfjax._frame._sparse_frame as sf_mod
+    from bsfjax.internal import decode_host, decode_traced, pack_lists
 
     rng = np.random.default_rng(7)
     n, q = 47, 140_000

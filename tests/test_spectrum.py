@@ -50,7 +50,7 @@ def test_sign_convention_and_determinism(faust_mesh, faust_spec):
 
 
 def test_dense_and_sparse_paths_agree(sphere_mesh, monkeypatch):
-    spec_mod = importlib.import_module("bsfjax._spectrum")  # the module, not the function
+    spec_mod = importlib.import_module("bsfjax._spectral._spectrum")  # the module, not the function
 
     dense = bsfjax.spectrum(sphere_mesh, 20)
     monkeypatch.setattr(spec_mod, "DENSE_LIMIT", 0)
@@ -104,7 +104,7 @@ def test_cache_roundtrip_and_corruption(tmp_path, sphere_mesh):
     s2 = bsfjax.spectrum(sphere_mesh, 12, cache_dir=tmp_path)
     np.testing.assert_array_equal(s1.evecs, s2.evecs)
     # a cache hit must not recompute: poison the solver and load again
-    spec_mod = importlib.import_module("bsfjax._spectrum")
+    spec_mod = importlib.import_module("bsfjax._spectral._spectrum")
 
     orig = spec_mod.spectrum_from_operators
     spec_mod.spectrum_from_operators = None
@@ -145,7 +145,7 @@ def test_spectrum_is_a_pytree(sphere_mesh):
 
 
 def test_spectrum_from_operators_validates():
-    from bsfjax._spectrum import interval_operators
+    from bsfjax.internal import interval_operators
 
     W, a = interval_operators(10)
     with pytest.raises(ValueError, match="k must be"):
@@ -175,7 +175,7 @@ def test_spectrum_k_errors(sphere_mesh):
 def test_signs_match_the_largest_magnitude_entry():
     # _signs reads each column's largest and smallest entries instead of |evecs|: the same
     # rule as the sign of argmax |x| (first index on a tie), +1 for a zero column
-    from bsfjax._spectrum import _signs
+    from bsfjax._spectral._spectrum import _signs
     rng = np.random.default_rng(5)
     X = rng.standard_normal((200, 30))
     X[:, 3] = 0.0

@@ -7,8 +7,8 @@ import pytest
 
 import bsfjax
 from bsfjax import Mesh
-from bsfjax._mesh import mesh_edges
-from bsfjax._subdivision import subdivide
+from bsfjax.internal import mesh_edges
+from bsfjax.internal import subdivide
 
 from .conftest import icosphere
 

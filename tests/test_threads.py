@@ -1,4 +1,4 @@
-"""One BLAS thread where more threads only spin (bsfjax._threads)."""
+"""One BLAS thread where more threads only spin (bsfjax._util._threads)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import numpy as np
 from threadpoolctl import threadpool_info
 
 import bsfjax
-from bsfjax import _spectrum, _threads
-from bsfjax._threads import on_one_blas_thread, one_blas_thread
+import bsfjax._spectral._spectrum as _spectrum
+import bsfjax._util._threads as _threads
+from bsfjax.internal import on_one_blas_thread, one_blas_thread
 
 
 def _blas_threads() -> list[int]:

@@ -122,7 +122,7 @@ SHARDED = textwrap.dedent("""
 def _function_batch(spec):
     """OMP codes of 7 functions (not a multiple of 4: padded) in a sparse and a dense frame, a
     least-squares approximation, and whether encode took the multi-device path."""
-    import bsfjax._encode as coding
+    import bsfjax._coding._encode as coding
 
     centers = np.arange(0, spec.n_vertices, 9)
     F = (np.random.default_rng(5).random((7, spec.n_vertices)) < 0.3).astype(np.float32)
@@ -180,8 +180,8 @@ def test_four_cpu_devices_give_identical_results(pairs, tmp_path):
 
 def test_frames_beyond_the_dense_budget_run_eagerly_on_list_frames(pairs, monkeypatch):
     """Above the dense budget the engine builds SparseFrames (eagerly): same numbers."""
-    import bsfjax._frame as frame_mod
-    import bsfjax._transfer as transfer_mod
+    import bsfjax._frame._build as frame_mod
+    import bsfjax._transfer._engine as transfer_mod
 
     src, tgt, n = pairs
     C, centers, F = _inputs(src, tgt, n)
@@ -196,7 +196,7 @@ def test_frames_beyond_the_dense_budget_run_eagerly_on_list_frames(pairs, monkey
 
     monkeypatch.setattr(frame_mod, "DENSE_BUDGET_BYTES", 1024)
     monkeypatch.setattr(transfer_mod, "DENSE_BUDGET_BYTES", 1024)
-    monkeypatch.setattr("bsfjax._methods.transfer_frame", spy)
+    monkeypatch.setattr("bsfjax._transfer._methods.transfer_frame", spy)
     listed = bsfjax.transfer("omp", p, F[0], sparsity=6)
     assert kinds == ["SparseFrame"]
     np.testing.assert_array_equal(np.asarray(listed.codes) != 0, np.asarray(dense.codes) != 0)

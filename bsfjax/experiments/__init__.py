@@ -1,36 +1,36 @@
 """The experiments of Melzi 2019 as library functions returning tidy tables, and ``reproduce``.
 
 Each experiment returns a list of flat ``dict`` rows (one per function × method × setting, a
-"tidy" table that :func:`write_csv` writes and :func:`summarize` aggregates).  One module per
+"tidy" table that `write_csv` writes and `summarize` aggregates).  One module per
 table or figure, each with its experiment function and its report:
 
 * ``table1`` — approximation error (Eq. 14) vs k ∈ {10, 30, 50, 70, 90}:
-  :func:`approximation_experiment` (:mod:`.table1`);
+  `approximation_experiment` (`.table1`);
 * ``table2`` — transfer error (Eq. 15) with ground-truth maps, same k:
-  :func:`transfer_experiment` (:mod:`.table2`);
-* ``fig7`` — transfer error as k_N grows, k_M ∈ {10, 30, 50}: :func:`kn_experiment`
-  (:mod:`.fig7`);
-* ``table3`` — frame build time (geod, heat, ours): :func:`frame_time_experiment`
-  (:mod:`.table3`);
+  `transfer_experiment` (`.table2`);
+* ``fig7`` — transfer error as k_N grows, k_M ∈ {10, 30, 50}: `kn_experiment`
+  (`.fig7`);
+* ``table3`` — frame build time (geod, heat, ours): `frame_time_experiment`
+  (`.table3`);
 * ``table4`` — time to transfer one function with estimated maps:
-  :func:`transfer_time_experiment` (:mod:`.table4`);
+  `transfer_time_experiment` (`.table4`);
 * ``table5`` — TOSCA classes, estimated 10×10 and 30×30 maps, two parameter sets:
-  :func:`tosca_experiment` (:mod:`.table5`);
+  `tosca_experiment` (`.table5`);
 * ``fig10`` — dependence on the n_BSF share, FPS distance, γ, ε and S:
-  :func:`parameter_experiment` (:mod:`.fig10`);
+  `parameter_experiment` (`.fig10`);
 * ``sparse`` (beyond the paper) — approximation and transfer error (ground-truth and estimated
   maps) against the number of non-zeros, paper scales vs ``taus="adaptive"`` vs the projection
-  with as many coefficients: :func:`sparse_experiment` (:mod:`.sparse`).
+  with as many coefficients: `sparse_experiment` (`.sparse`).
 
-Errors are the square-root form ``‖f − f̃‖_A / ‖f‖_A`` (:func:`bsfjax.relative_error`).
+Errors are the square-root form ``‖f − f̃‖_A / ‖f‖_A`` ([`bsfjax.relative_error`][bsfjax.relative_error]).
 Test functions are random connected indicators covering 5–25 % of the area
-(:func:`bsfjax.random_indicators`), drawn on each source shape from ``seed``.  Settings are the
+([`bsfjax.random_indicators`][bsfjax.random_indicators]), drawn on each source shape from ``seed``.  Settings are the
 paper's: n_BSF = 5 % of the vertices by Euclidean farthest point sampling, τ ∈ {0.001, 0.005,
 0.01} (unit-area convention), γ = 0.75, OMP S = 10, ``omp_error`` ε = ‖f‖/10.  Ground-truth
-maps are ``C = Φ_Nᵀ A_N Π Φ_M`` (:func:`bsfjax.fmap_from_p2p`); the ``p2p`` baseline uses the
-point map recovered from the same ``k × k`` map (:func:`bsfjax.fmap_to_p2p`), so every method
+maps are ``C = Φ_Nᵀ A_N Π Φ_M`` ([`bsfjax.fmap_from_p2p`][bsfjax.fmap_from_p2p]); the ``p2p`` baseline uses the
+point map recovered from the same ``k × k`` map ([`bsfjax.fmap_to_p2p`][bsfjax.fmap_to_p2p]), so every method
 sees the same information.  Estimated maps (tables 4–5) minimise descriptor preservation +
-Laplacian and descriptor commutativity (:func:`bsfjax.estimate_fmap`) with WKS descriptors plus
+Laplacian and descriptor commutativity ([`bsfjax.estimate_fmap`][bsfjax.estimate_fmap]) with WKS descriptors plus
 WKS at 5 landmarks (chosen by farthest point sampling on the target, paired through the ground
 truth).  All pairs of one size are stacked and every method runs on all pairs × functions in
 one jitted ``vmap``; only methods, settings and groups of differently sized pairs are Python
@@ -38,14 +38,14 @@ loops.
 
 Layout of the package:
 
-* ``_registry.py``: :class:`Experiment` records, :data:`EXPERIMENTS` (name → record) and
-  :func:`reproduce` (looks the name up, runs it, writes ``NAME.csv``, ``NAME.md``,
+* ``_registry.py``: `Experiment` records, `EXPERIMENTS` (name → record) and
+  `reproduce` (looks the name up, runs it, writes ``NAME.csv``, ``NAME.md``,
   ``NAME.json`` and, for figures, ``NAME.png``);
 * ``_engine.py``: the **only** module that calls the transfer engine (methods, settings,
   pair inputs, frames and coders); switching engines changes that file alone;
 * ``_io.py``: CSV, summaries, Markdown pivots, PNG line plots, atomic writes;
 * ``_shapes.py``: shapes (spectra, centres), test functions, functional maps;
-* ``_datasets.py``: ``--data`` folders (:func:`load_dataset`);
+* ``_datasets.py``: ``--data`` folders (`load_dataset`);
 * one module per table or figure: ``table1.py`` … ``sparse.py``.
 
 **Adding an experiment** = one new module + one registry line.  The module (say
@@ -53,7 +53,7 @@ Layout of the package:
 ``DEFAULT_KS``, ``run(dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> rows``
 and ``report(rows, ks) -> Report`` (Markdown, optional figure panels, optional settings line),
 calling the engine only through ``_engine``; then in ``_registry.py`` import it and add
-``_entry("segmentation", segmentation),`` to :data:`EXPERIMENTS` — ``reproduce`` and the
+``_entry("segmentation", segmentation),`` to `EXPERIMENTS` — ``reproduce`` and the
 ``bsfjax reproduce`` command pick it up from there.
 """
 

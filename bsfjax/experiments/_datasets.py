@@ -27,7 +27,7 @@ target vertex ``i``.  With ``.vts`` files, target vertices listed there get thei
 a target vertex not listed (a few per remeshed shape) takes the partner of the nearest listed
 target vertex (Euclidean, on ``N``); if a target vertex is listed twice, the first entry wins.
 
-Bad folders raise :class:`bsfjax.BSFError` naming the folder or file: a missing folder, no
+Bad folders raise [`bsfjax.BSFError`][bsfjax.BSFError] naming the folder or file: a missing folder, no
 meshes, a missing or malformed ``.vts``, out-of-range indices, ``.vts`` files of different
 lengths, or meshes of different sizes without correspondence files.
 """
@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 import scipy.spatial
 
-from .._errors import BSFError, MeshError
+from .._util import BSFError, MeshError
 from .._mesh import Mesh, load_mesh
 
 __all__ = ["Dataset", "ShapeEntry", "load_dataset", "MESH_SUFFIXES"]
@@ -84,7 +84,7 @@ class Dataset:
                 for b in idx[ia + 1:]]
 
     def pairs(self, count: int | None = None, seed: int = 0) -> list[tuple[int, int]]:
-        """``count`` pairs (source, target) drawn without repetition from :meth:`all_pairs`
+        """``count`` pairs (source, target) drawn without repetition from `all_pairs`
         (all of them when ``count`` is ``None``), in a seed-determined order; classes take
         turns so that every class is represented when ``count ≥ number of classes``."""
         rng = np.random.default_rng(seed)

@@ -1,25 +1,25 @@
 """The experiments' one adapter to the transfer engine.
 
-Every call of the experiments into the engine (:func:`bsfjax.transfer` and its method objects,
-:data:`bsfjax.METHODS`, :class:`bsfjax.Pair`) and into the array-level BSF functions
-(:func:`~bsfjax.encode`, :func:`~bsfjax.decode`, :func:`~bsfjax.build_frame`,
-:func:`~bsfjax.transfer_frame`) goes through this module, and no other module of
-:mod:`bsfjax.experiments` imports the engine.
+Every call of the experiments into the engine ([`bsfjax.transfer`][bsfjax.transfer] and its method objects,
+[`bsfjax.METHODS`][bsfjax.METHODS], [`bsfjax.Pair`][bsfjax.Pair]) and into the array-level BSF functions
+([`encode`][bsfjax.encode], [`decode`][bsfjax.decode], [`build_frame`][bsfjax.build_frame],
+[`transfer_frame`][bsfjax.transfer_frame]) goes through this module, and no other module of
+[`bsfjax.experiments`][bsfjax.experiments] imports the engine.
 
 What the experiments see:
 
-* method names: :data:`METHODS`, :data:`CODERS`, :data:`APPROX_METHODS`,
-  :data:`TRANSFER_METHODS`, :data:`KN_METHODS`, :data:`PLAIN_METHODS`;
-* settings: :func:`settings` (``settings(**overrides)``: the paper's defaults, i.e. each
+* method names: [`METHODS`][bsfjax.METHODS], [`CODERS`][bsfjax.CODERS], `APPROX_METHODS`,
+  `TRANSFER_METHODS`, `KN_METHODS`, `PLAIN_METHODS`;
+* settings: `settings` (``settings(**overrides)``: the paper's defaults, i.e. each
   method's own defaults, with ``taus``, ``gamma``, ``sparsity``, ``eps_fraction``, … applied
   to every method that has that option, on the method or on its coder) and
-  :data:`PARAMETER_SETS` (Table 5's two sets);
-* one pair (or a stack of pairs): :func:`pair_input`, :func:`stack`;
-* running one method: :func:`run_method` → ``(approximation, transferred, codes)``;
-* Table 3's timed frames: :func:`frame_atoms` (the BSF), :func:`heat_frame` (the
-  saturated kernels of the ``heat`` baseline) and their size :func:`n_atoms`;
-* the array-level functions, re-exported: :func:`build_frame`, :func:`transfer_frame`,
-  :func:`encode`, :func:`decode`.
+  `PARAMETER_SETS` (Table 5's two sets);
+* one pair (or a stack of pairs): `pair_input`, `stack`;
+* running one method: `run_method` → ``(approximation, transferred, codes)``;
+* Table 3's timed frames: `frame_atoms` (the BSF), `heat_frame` (the
+  saturated kernels of the ``heat`` baseline) and their size `n_atoms`;
+* the array-level functions, re-exported: [`build_frame`][bsfjax.build_frame], [`transfer_frame`][bsfjax.transfer_frame],
+  [`encode`][bsfjax.encode], [`decode`][bsfjax.decode].
 """
 
 from __future__ import annotations
@@ -28,10 +28,9 @@ import dataclasses
 
 import jax.numpy as jnp
 
-from .._encode import decode, encode
+from .._coding import decode, encode
 from .._frame import build_frame, transfer_frame
-from .._methods import (BSF, CODER_NAMES, METHODS as _METHODS, PAPER_GAMMA, PAPER_TAUS,
-                        AbstractMethod, Pair, _saturate)
+from .._transfer import BSF, CODER_NAMES, METHODS as _METHODS, PAPER_GAMMA, PAPER_TAUS, AbstractMethod, Pair, saturate
 from .._transfer import TransferResult, stack_pairs
 from .._transfer import transfer as _run_transfer
 
@@ -131,11 +130,11 @@ def run_method(method: str, pair, F, *, k: int, settings: Settings, transfer: bo
     """Approximate ``F`` on the source with ``method`` and transfer it to the target.
 
     Arguments:
-        method: one of :data:`METHODS`.
-        pair: :func:`pair_input` (or a :func:`stack` of them).
+        method: one of [`METHODS`][bsfjax.METHODS].
+        pair: `pair_input` (or a `stack` of them).
         F: ``(m, n_M)`` functions (``(P, m, n_M)`` for a stack).
         k: source basis size.
-        settings: :func:`settings`.
+        settings: `settings`.
         transfer: also transfer (else ``transferred`` is ``None``).
         k_targets: target sizes: one transfer per ``C[:k_N]`` (``transferred`` a tuple).
 
@@ -159,4 +158,4 @@ def n_atoms(settings: Settings, n_centers: int) -> int:
 def heat_frame(spectrum, centers, settings: Settings):
     """The ``heat`` baseline's frame: the BSF's band-limited kernels, saturated (Table 3)."""
     fr = build_frame(spectrum, centers, settings.taus, settings.gamma)
-    return _saturate(jnp.asarray(spectrum.evecs, fr.coeffs.dtype) @ fr.coeffs, settings.gamma)
+    return saturate(jnp.asarray(spectrum.evecs, fr.coeffs.dtype) @ fr.coeffs, settings.gamma)

@@ -1,6 +1,6 @@
 """Files and tables of the experiments: tidy rows → CSV, summaries, Markdown pivots, PNG plots.
 
-All files are written atomically (:func:`bsfjax._files.atomic_path`): a failed or interrupted
+All files are written atomically (`bsfjax._files.atomic_path`): a failed or interrupted
 run leaves no partial file.
 """
 
@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._files import atomic_path
+from .._util import atomic_path
 
 __all__ = ["summarize", "pivot_markdown", "write_csv", "Report"]
 
@@ -29,7 +29,7 @@ class Report(NamedTuple):
         markdown: the body of ``NAME.md`` (below the header).
         panels: figure panels for ``NAME.png`` (``[(title, xlabel, {label: (xs, ys)},
             categorical)]``, see ``_line_plot``), or ``None`` for no figure.
-        settings: the settings line of the header, or ``None`` for :data:`PAPER_SETTINGS`.
+        settings: the settings line of the header, or ``None`` for `PAPER_SETTINGS`.
     """
 
     markdown: str

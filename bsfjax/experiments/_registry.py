@@ -1,10 +1,10 @@
-"""The registry of experiments and :func:`reproduce`, which runs one of them by name.
+"""The registry of experiments and `reproduce`, which runs one of them by name.
 
-An :class:`Experiment` names a module's two functions: ``run`` (the uniform call
+An `Experiment` names a module's two functions: ``run`` (the uniform call
 ``run(dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> rows``) and ``report``
 (``report(rows, ks) -> Report``: Markdown, optional figure panels, optional settings line).
-:func:`reproduce` looks the name up in :data:`EXPERIMENTS`, runs it, and writes the files; the
-``bsfjax reproduce`` command takes its choices from :data:`EXPERIMENTS`.
+`reproduce` looks the name up in `EXPERIMENTS`, runs it, and writes the files; the
+``bsfjax reproduce`` command takes its choices from `EXPERIMENTS`.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from .._errors import BSFError
+from .._util import BSFError
 from . import fig7, fig10, segmentation, sparse, table1, table2, table3, table4, table5
 from ._datasets import load_dataset
 from ._io import PAPER_SETTINGS, Report, _header, _line_plot, _write_text, write_csv
@@ -57,7 +57,7 @@ def _entry(name: str, module, **kw) -> Experiment:
                       module.report, **kw)
 
 
-#: name → :class:`Experiment`, in the order of ``bsfjax reproduce --help``.
+#: name → `Experiment`, in the order of ``bsfjax reproduce --help``.
 EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     _entry("table1", table1),
     _entry("table2", table2),
@@ -77,8 +77,8 @@ def reproduce(name: str, data, out, *, pairs: int = 2, functions: int = 100, see
     ``NAME.json`` (and ``NAME.png`` for figures) into ``out``.
 
     Arguments:
-        name: a key of :data:`EXPERIMENTS`.
-        data: the ``--data`` folder (:func:`load_dataset`).
+        name: a key of `EXPERIMENTS`.
+        data: the ``--data`` folder (`load_dataset`).
         out: output folder.
         pairs: number of pairs (table5: per class).
         functions: random indicators per shape.
@@ -138,7 +138,7 @@ def reproduce(name: str, data, out, *, pairs: int = 2, functions: int = 100, see
 
 
 def cli(args) -> int:
-    """``bsfjax reproduce NAME --data DIR --out DIR [...]`` (see :func:`reproduce`)."""
+    """``bsfjax reproduce NAME --data DIR --out DIR [...]`` (see `reproduce`)."""
     ks = None
     if args.k:
         try:

@@ -1,15 +1,15 @@
 """Shapes, test functions and functional maps shared by the experiments.
 
-* :class:`ShapeData` / :func:`prepare_shapes`: a dataset shape with its spectrum, its n_BSF
+* `ShapeData` / `prepare_shapes`: a dataset shape with its spectrum, its n_BSF
   centres (farthest point sampling) and, for the ``geod`` baseline, geodesic distances;
 * ``_functions``: the test functions of a shape, random connected indicators covering 5–25 %
-  of the area (:func:`bsfjax.random_indicators`), one random stream per (seed, shape);
-* ``_Maps``: ground-truth maps ``C = Φ_Nᵀ A_N Π Φ_M`` (:func:`bsfjax.fmap_from_p2p`, one big
-  map per pair, sliced) or estimated ones (:func:`bsfjax.estimate_fmap` with WKS + WKS at
-  :data:`N_LANDMARKS` landmarks, chosen by farthest point sampling on the target and paired
+  of the area ([`bsfjax.random_indicators`][bsfjax.random_indicators]), one random stream per (seed, shape);
+* ``_Maps``: ground-truth maps ``C = Φ_Nᵀ A_N Π Φ_M`` ([`bsfjax.fmap_from_p2p`][bsfjax.fmap_from_p2p], one big
+  map per pair, sliced) or estimated ones ([`bsfjax.estimate_fmap`][bsfjax.estimate_fmap] with WKS + WKS at
+  `N_LANDMARKS` landmarks, chosen by farthest point sampling on the target and paired
   through the ground truth);
 * ``_pair_input``: the stacked engine input of a group of pairs (``p2p`` gets the point map
-  recovered from the same ``k × k`` map, :func:`bsfjax.fmap_to_p2p`, so that every method sees
+  recovered from the same ``k × k`` map, [`bsfjax.fmap_to_p2p`][bsfjax.fmap_to_p2p], so that every method sees
   the same information);
 * argument checks (``_check_ks``, ``_check_methods``) and grouping of equal-sized pairs
   (``_groups``: pairs of one size run under one ``vmap``).
@@ -25,15 +25,15 @@ from tqdm.auto import tqdm
 
 from . import _engine
 from ._datasets import Dataset
-from .._descriptors import wks
-from .._errors import BSFError
-from .._estimation import estimate_fmap
-from .._fmap import fmap_from_p2p, fmap_to_p2p
-from .._geodesics import geodesic_distances
-from .._indicators import random_indicators
+from .._maps import wks
+from .._util import BSFError
+from .._maps import estimate_fmap
+from .._maps import fmap_from_p2p, fmap_to_p2p
+from .._sampling import geodesic_distances
+from .._metrics import random_indicators
 from .._metrics import relative_error
 from .._sampling import farthest_point_sampling
-from .._spectrum import Spectrum, spectrum
+from .._spectral import Spectrum, spectrum
 
 __all__ = ["ShapeData", "prepare_shapes", "N_LANDMARKS"]
 
@@ -61,7 +61,7 @@ def prepare_shapes(dataset: Dataset, indices: Sequence[int], *, k_max: int, n_bs
     """Spectra (``k_max`` eigenpairs), FPS centres and optional geodesic distances per shape.
 
     Arguments:
-        dataset: the loaded ``--data`` folder (:func:`load_dataset`).
+        dataset: the loaded ``--data`` folder (`load_dataset`).
         indices: the shapes (indices into ``dataset.shapes``; duplicates are fine).
         k_max: eigenpairs to compute (at most the vertex count).
         n_bsf: BSF centres, a share of the vertices (float) or a count (int).
@@ -147,7 +147,7 @@ class _Maps:
 
 
 def _pair_input(shapes, maps: _Maps, pairs, method: str, k: int, k_n: int):
-    """Stacked engine input (:func:`._engine.pair_input`) of ``pairs`` for ``method`` at sizes
+    """Stacked engine input (`._engine.pair_input`) of ``pairs`` for ``method`` at sizes
     ``(k_n, k)``."""
     items = []
     for p in pairs:

@@ -1,6 +1,6 @@
 """Fig. 10 of Melzi 2019: dependence of the BSF coders on one setting at a time, at k = 30 with
 ground-truth maps: the centre share n_BSF, the farthest-point-sampling distance, γ, ``omp_error``'s
-ε and ``omp``'s S (:data:`SWEEPS`, around the paper's defaults).
+ε and ``omp``'s S (`SWEEPS`, around the paper's defaults).
 
 Report: per setting, the mean transfer and approximation errors per method and value, one
 figure panel per setting (solid: transfer, dashed: approximation), and the spread (max − min of
@@ -12,7 +12,7 @@ from __future__ import annotations
 from . import _engine
 from ._datasets import Dataset
 from ._engine import CODERS
-from .._errors import BSFError
+from .._util import BSFError
 from ._io import Report, _curve, pivot_markdown, summarize
 from ._shapes import _Maps, prepare_shapes
 from .table2 import _transfer_rows
@@ -36,15 +36,15 @@ def parameter_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 1
                          sweeps=None, seed: int = 0, cache_dir=None,
                          progress: bool = True) -> list[dict]:
     """Fig. 10: approximation and ground-truth-map transfer error of the BSF coders at ``k``
-    while one setting varies around the paper's defaults (:data:`SWEEPS`): the centre share
+    while one setting varies around the paper's defaults (`SWEEPS`): the centre share
     n_BSF, the FPS distance, γ (all four coders), ε (``omp_error``) and S (``omp``).
 
     Arguments:
-        dataset: the ``--data`` folder (:func:`load_dataset`).
+        dataset: the ``--data`` folder (`load_dataset`).
         pairs: number of pairs.
         functions: random indicators per source shape.
         k: basis size (square ground-truth maps).
-        sweeps: a sub-dict of :data:`SWEEPS` (``None``: all of it).
+        sweeps: a sub-dict of `SWEEPS` (``None``: all of it).
         seed: seed of the pairs, the functions and the FPS.
         cache_dir: eigenbasis cache folder.
         progress: show progress bars.
@@ -87,7 +87,7 @@ def parameter_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 1
 
 
 def run(dataset: Dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> list[dict]:
-    """``reproduce``'s call: :func:`parameter_experiment` at ``k = ks[0]``, every sweep."""
+    """``reproduce``'s call: `parameter_experiment` at ``k = ks[0]``, every sweep."""
     return parameter_experiment(dataset, pairs=pairs, functions=functions, k=ks[0], seed=seed,
                                 cache_dir=cache_dir, progress=progress)
 

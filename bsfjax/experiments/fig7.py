@@ -3,7 +3,7 @@ the target basis size ``k_N`` grows, for ``k_M`` ∈ {10, 30, 50}.
 
 The functions are coded once on the source per ``(k_M, method)`` and transferred through each
 ``C[:k_N]`` (exact truncation of the ground-truth map).  Only the methods whose transfer
-depends on ``k_N`` through ``C`` alone (:data:`KN_METHODS`: ``std`` and the BSF coders) take
+depends on ``k_N`` through ``C`` alone (`KN_METHODS`: ``std`` and the BSF coders) take
 part.  Report: mean error per (k_M, method) and k_N, one figure panel per k_M.
 """
 
@@ -16,8 +16,7 @@ from . import _engine
 from ._datasets import Dataset
 from ._engine import KN_METHODS, TRANSFER_METHODS
 from ._io import Report, _curve, pivot_markdown, summarize
-from ._shapes import (_Maps, _check_ks, _check_methods, _errors, _functions, _groups,
-                      _pair_input, prepare_shapes)
+from ._shapes import _Maps, _check_ks, _check_methods, _errors, _functions, _groups, _pair_input, prepare_shapes
 
 __all__ = ["KN_METHODS", "kn_experiment"]
 
@@ -32,13 +31,13 @@ def kn_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 100,
     """Fig. 7: transfer error with ground-truth ``(k_N, k_M)`` maps as ``k_N`` grows.
 
     Arguments:
-        dataset: the ``--data`` folder (:func:`load_dataset`).
+        dataset: the ``--data`` folder (`load_dataset`).
         pairs: number of pairs.
         functions: random indicators per source shape.
         k_sources: the source sizes ``k_M``.
         k_targets: the target sizes ``k_N``.
         methods: a subset of the methods other than ``std2`` and ``p2p``.
-        params: engine settings (:func:`._engine.settings`; ``None``: the paper's).
+        params: engine settings (`._engine.settings`; ``None``: the paper's).
         n_bsf: BSF centres (share of the vertices or count).
         seed: seed of the pairs, the functions and the FPS.
         cache_dir: eigenbasis cache folder.
@@ -87,7 +86,7 @@ def kn_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 100,
 
 
 def run(dataset: Dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> list[dict]:
-    """``reproduce``'s call: :func:`kn_experiment` with ``ks`` as the k_M list."""
+    """``reproduce``'s call: `kn_experiment` with ``ks`` as the k_M list."""
     return kn_experiment(dataset, pairs=pairs, functions=functions, k_sources=ks, seed=seed,
                          cache_dir=cache_dir, progress=progress)
 

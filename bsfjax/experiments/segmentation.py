@@ -32,15 +32,15 @@ import numpy as np
 import scipy.spatial
 from tqdm.auto import tqdm
 
-from .._errors import BSFError
-from .._fmap import fmap_from_p2p
-from .._highlevel import transfer_labels
-from .._map_estimate import WKS_VARIANCE, ZOOMOUT_SAMPLES, estimate_map
-from .._label_files import load_labels
+from .._util import BSFError
+from .._maps import fmap_from_p2p
+from .._pipeline import transfer_labels
+from .._maps import WKS_VARIANCE, ZOOMOUT_SAMPLES, estimate_map
+from .._mesh import load_labels
 from .._mesh import mesh_edges
-from .._refine import REFINE_EIGENPAIRS
+from .._maps import REFINE_EIGENPAIRS
 from .._sampling import farthest_point_sampling, subsample
-from .._spectrum import spectrum
+from .._spectral import spectrum
 from ._datasets import Dataset
 from ._io import Report, pivot_markdown
 
@@ -185,11 +185,11 @@ def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k
 
     Arguments:
         dataset: the ``--data`` folder.
-        segmentation: template segmentation file (:func:`bsfjax.load_labels`).
-        pairs, seed: number of pairs drawn by :meth:`Dataset.pairs`.
+        segmentation: template segmentation file ([`bsfjax.load_labels`][bsfjax.load_labels]).
+        pairs, seed: number of pairs drawn by `Dataset.pairs`.
         k: basis size of the maps and of the spectral methods (spectra: ``K_SPECTRA``).
-        methods, maps: subsets of :data:`METHODS` and :data:`MAPS` (default
-            :data:`DEFAULT_MAPS`).
+        methods, maps: subsets of [`METHODS`][bsfjax.METHODS] and `MAPS` (default
+            `DEFAULT_MAPS`).
         cache_dir: eigenbasis cache folder.
         keep_labels: the first ``keep_labels`` pairs keep their per-vertex labels in the rows
             (keys ``_labels``, ``_truth``, ``_mesh``, not written to the CSV) for the figure.
@@ -220,14 +220,14 @@ def segmentation_pair(sm, sn, meshes, labels_m: np.ndarray, labels_n: np.ndarray
                       gt: np.ndarray, *, k: int = 30, methods=tuple(METHODS), maps=DEFAULT_MAPS,
                       seed: int = 0, names=("source", "target"),
                       keep_labels: bool = False) -> list[dict]:
-    """One pair of :func:`segmentation_experiment`: every method through every map.
+    """One pair of `segmentation_experiment`: every method through every map.
 
     Arguments:
         sm, sn: the pair's spectra (``K_SPECTRA`` eigenpairs, or fewer on small meshes).
         meshes: ``(source mesh, target mesh)``.
         labels_m, labels_n: the source's labels and the target's true labels.
         gt: the ground-truth point map (target vertex → source vertex).
-        k, methods, maps, seed: as in :func:`segmentation_experiment`.
+        k, methods, maps, seed: as in `segmentation_experiment`.
         names: the row's ``source`` and ``target``.
         keep_labels: keep the per-vertex labels in the rows (for the figure).
     """
@@ -327,8 +327,8 @@ def _figure(rows: list[dict], path) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from .._files import atomic_path
-    from ..plot import _label_colour, _Scene
+    from .._util import atomic_path
+    from .._plot import label_colour, Scene
 
     first = (rows[0]["source"], rows[0]["target"])
     rows = [r for r in rows if (r["source"], r["target"]) == first]
@@ -342,12 +342,12 @@ def _figure(rows: list[dict], path) -> Path:
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     for ax in axes[len(panels):]:
         ax.set_axis_off()
-    scene = _Scene(mesh, ["front"], "y")
+    scene = Scene(mesh, ["front"], "y")
     for ax, (title, lab) in zip(axes, panels):
         face = np.asarray(lab)[mesh.faces]
         # a face takes the label of its first vertex unless the other two agree
         fl = np.where(face[:, 1] == face[:, 2], face[:, 1], face[:, 0])
-        scene.draw(ax, 0, _label_colour(fl), title)
+        scene.draw(ax, 0, label_colour(fl), title)
         ax.title.set_fontsize(7)
     fig.suptitle(f"{first[0]} → {first[1]}, default map", fontsize=8)
     fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=1 - 0.1 / nrows, wspace=0.0,

@@ -3,7 +3,7 @@ non-zeros, with the paper's BSF scales and with ``taus="adaptive"``, against the
 projection with as many coefficients.
 
 Transfers use the ground-truth map (paper Eq. 11–12) and an estimated map (WKS + 5 landmarks
-+ ZoomOut, :func:`bsfjax.estimate_map`), whose BSF transfer is done both by re-binarization
++ ZoomOut, [`bsfjax.estimate_map`][bsfjax.estimate_map]), whose BSF transfer is done both by re-binarization
 and through the refined point map.  Report: the issue's target ratios, error and non-zero
 tables, one figure with three panels (approximation, GT-map transfer, estimated-map
 transfer).
@@ -16,9 +16,9 @@ from tqdm.auto import tqdm
 
 from . import _engine
 from ._datasets import Dataset
-from .._errors import BSFError
-from .._fmap import fmap_from_p2p
-from .._map_estimate import estimate_map
+from .._util import BSFError
+from .._maps import fmap_from_p2p
+from .._maps import estimate_map
 from ._io import Report, _curve, pivot_markdown, summarize
 from .._sampling import farthest_point_sampling
 from ._shapes import N_LANDMARKS, _check_ks, _errors, _functions, prepare_shapes
@@ -33,7 +33,7 @@ DESCRIPTION = ("Beyond the paper: approximation and transfer error against the n
 #: Numbers of non-zeros of the ``sparse`` experiment (OMP's S; the projection's coefficients).
 SPARSITIES = (5, 10, 20, 30, 50)
 #: Frames of the ``sparse`` experiment: name → (taus, prune).  "paper" is the paper's frame
-#: exactly; "adaptive" the 6 scales of :func:`bsfjax.adaptive_taus`, pruned.
+#: exactly; "adaptive" the 6 scales of [`bsfjax.adaptive_taus`][bsfjax.adaptive_taus], pruned.
 SPARSE_FRAMES = {"paper": ((1e-3, 5e-3, 1e-2), False), "adaptive": ("adaptive", True)}
 
 
@@ -47,17 +47,17 @@ def sparse_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 100,
 
     * ``std``: projection on the first ``s`` eigenfunctions, ``s`` ∈ ``sparsities`` (its
       number of coefficients), transferred with ``C[:s, :s]``;
-    * ``omp`` with ``sparsity = S`` ∈ ``sparsities`` on each frame of :data:`SPARSE_FRAMES`
+    * ``omp`` with ``sparsity = S`` ∈ ``sparsities`` on each frame of `SPARSE_FRAMES`
       (n_BSF centres, γ = 0.75, area-weighted coding), and ``lstsq`` on each frame (all atoms,
       ``sparsity = "all"``), plus ``lasso`` with ``target_atoms`` ∈ ``lasso_targets``;
     * transfer with the ground-truth map (``maps = "gt"``, paper Eq. 11–12 re-binarization)
-      and with an estimated map (``maps = "estimated"``: :func:`bsfjax.estimate_map`,
+      and with an estimated map (``maps = "estimated"``: [`bsfjax.estimate_map`][bsfjax.estimate_map],
       WKS + 5 landmarks — FPS on ``N``, paired by the ground truth — ZoomOut to ``2k``), whose
       BSF transfer is done both ways, ``frame_transfer = "binary"`` (Eq. 11–12 with the
       estimated ``C``) and ``"p2p"`` (atoms pulled back through the refined point map).
 
     Arguments:
-        dataset: the ``--data`` folder (:func:`load_dataset`).
+        dataset: the ``--data`` folder (`load_dataset`).
         pairs: number of pairs.
         functions: random indicators per source shape.
         k: basis size (int ≥ 2).
@@ -201,7 +201,7 @@ def _sparse_panels(rows):
 
 
 def run(dataset: Dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> list[dict]:
-    """``reproduce``'s call: :func:`sparse_experiment` at ``k = ks[0]``, the sparsities ≤ k."""
+    """``reproduce``'s call: `sparse_experiment` at ``k = ks[0]``, the sparsities ≤ k."""
     k = ks[0]
     return sparse_experiment(dataset, pairs=pairs, functions=functions, k=k,
                              sparsities=[v for v in SPARSITIES if v <= k], seed=seed,

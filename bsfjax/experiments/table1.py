@@ -1,6 +1,6 @@
 """Table 1 of Melzi 2019: approximation error (Eq. 14) against the basis size k.
 
-Every method of :data:`APPROX_METHODS` (all but ``p2p``, which has no approximation) codes the
+Every method of `APPROX_METHODS` (all but ``p2p``, which has no approximation) codes the
 random indicator functions of the source shapes of ``pairs`` pairs with ``k`` ∈ {10, 30, 50,
 70, 90} eigenfunctions; the error is ``‖f − f̃‖_A / ‖f‖_A``.  Report: mean error per method
 (rows) and k (columns).
@@ -15,8 +15,7 @@ from . import _engine
 from ._datasets import Dataset
 from ._engine import APPROX_METHODS
 from ._io import Report, pivot_markdown
-from ._shapes import (_check_ks, _check_methods, _errors, _functions, _groups, _k_needed,
-                      prepare_shapes)
+from ._shapes import _check_ks, _check_methods, _errors, _functions, _groups, _k_needed, prepare_shapes
 
 __all__ = ["DEFAULT_KS", "APPROX_METHODS", "approximation_experiment"]
 
@@ -34,12 +33,12 @@ def approximation_experiment(dataset: Dataset, *, pairs: int = 2, functions: int
     """Table 1: approximation error on the source shapes of ``pairs`` pairs, per method and k.
 
     Arguments:
-        dataset: the ``--data`` folder (:func:`load_dataset`).
+        dataset: the ``--data`` folder (`load_dataset`).
         pairs: number of pairs (their source shapes are coded).
         functions: random indicators per shape.
         ks: basis sizes.
-        methods: a subset of :data:`APPROX_METHODS`.
-        params: engine settings (:func:`._engine.settings`; ``None``: the paper's).
+        methods: a subset of `APPROX_METHODS`.
+        params: engine settings (`._engine.settings`; ``None``: the paper's).
         n_bsf: BSF centres (share of the vertices or count).
         seed: seed of the pairs, the functions and the FPS.
         cache_dir: eigenbasis cache folder.
@@ -82,7 +81,7 @@ def approximation_experiment(dataset: Dataset, *, pairs: int = 2, functions: int
 
 
 def run(dataset: Dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> list[dict]:
-    """``reproduce``'s call: :func:`approximation_experiment` with every method at ``ks``."""
+    """``reproduce``'s call: `approximation_experiment` with every method at ``ks``."""
     return approximation_experiment(dataset, pairs=pairs, functions=functions, ks=ks, seed=seed,
                                     cache_dir=cache_dir, progress=progress)
 

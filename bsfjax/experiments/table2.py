@@ -1,9 +1,9 @@
 """Table 2 of Melzi 2019: transfer error (Eq. 15) with ground-truth ``k × k`` maps.
 
 The random indicators of the source shape of each pair are coded by every method of
-:data:`TRANSFER_METHODS` and carried to the target by the ground-truth functional map
+`TRANSFER_METHODS` and carried to the target by the ground-truth functional map
 ``C = Φ_Nᵀ A_N Π Φ_M``; the error ``‖f∘T − f̃_N‖_A / ‖f∘T‖_A`` is measured on the target.
-:func:`transfer_experiment` also runs with estimated maps (``maps="estimated"``), and
+`transfer_experiment` also runs with estimated maps (``maps="estimated"``), and
 ``_transfer_rows`` — the loop over groups of equal-sized pairs, sizes and methods — is shared
 with Table 5 and Fig. 10.
 """
@@ -16,10 +16,9 @@ from tqdm.auto import tqdm
 from . import _engine
 from ._datasets import Dataset
 from ._engine import TRANSFER_METHODS
-from .._errors import BSFError
+from .._util import BSFError
 from ._io import Report, pivot_markdown
-from ._shapes import (_Maps, _check_ks, _check_methods, _errors, _functions, _groups,
-                      _k_needed, _pair_input, prepare_shapes)
+from ._shapes import _Maps, _check_ks, _check_methods, _errors, _functions, _groups, _k_needed, _pair_input, prepare_shapes
 from .table1 import DEFAULT_KS
 
 __all__ = ["TRANSFER_METHODS", "transfer_experiment"]
@@ -71,12 +70,12 @@ def transfer_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 10
     error on ``pairs`` pairs with square ``k × k`` maps.
 
     Arguments:
-        dataset: the ``--data`` folder (:func:`load_dataset`).
+        dataset: the ``--data`` folder (`load_dataset`).
         pairs: number of pairs.
         functions: random indicators per source shape.
         ks: basis sizes (square maps).
-        methods: a subset of :data:`TRANSFER_METHODS`.
-        params: engine settings (:func:`._engine.settings`; ``None``: the paper's).
+        methods: a subset of `TRANSFER_METHODS`.
+        params: engine settings (`._engine.settings`; ``None``: the paper's).
         maps: ``"gt"`` (ground truth) or ``"estimated"`` (WKS + 5 landmarks).
         n_bsf: BSF centres (share of the vertices or count).
         seed: seed of the pairs, the functions and the FPS.
@@ -106,7 +105,7 @@ def transfer_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 10
 
 
 def run(dataset: Dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> list[dict]:
-    """``reproduce``'s call: :func:`transfer_experiment` (ground-truth maps, every method)."""
+    """``reproduce``'s call: `transfer_experiment` (ground-truth maps, every method)."""
     return transfer_experiment(dataset, pairs=pairs, functions=functions, ks=ks, seed=seed,
                                cache_dir=cache_dir, progress=progress)
 

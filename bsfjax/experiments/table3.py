@@ -19,9 +19,9 @@ from . import _engine
 from ._datasets import Dataset
 from ._io import Report, pivot_markdown
 from ._shapes import _check_ks
-from .._geodesics import geodesic_distances
+from .._sampling import geodesic_distances
 from .._sampling import farthest_point_sampling
-from .._spectrum import spectrum
+from .._spectral import spectrum
 
 __all__ = ["frame_time_experiment"]
 
@@ -47,17 +47,17 @@ def frame_time_experiment(dataset: Dataset, *, pairs: int = 2, ks=DEFAULT_KS, pa
                           progress: bool = True) -> list[dict]:
     """Table 3: time to build the frames (geod, heat, ours) on the source shapes.
 
-    ``ours``: :func:`bsfjax.build_frame` (Algorithm 1).  ``heat``: the same kernels, saturated.
+    ``ours``: [`bsfjax.build_frame`][bsfjax.build_frame] (Algorithm 1).  ``heat``: the same kernels, saturated.
     ``geod``: heat-method geodesic distances from the ``n_BSF`` centres, thresholded at the 3
     radii (the radii themselves are taken as given).  The eigenbasis (shared by ours and heat)
     is timed separately as ``eigenbasis``.  Times are medians of ``repeats`` runs after one
     warm-up (compilation) run; rows also give the first-call time.
 
     Arguments:
-        dataset: the ``--data`` folder (:func:`load_dataset`).
+        dataset: the ``--data`` folder (`load_dataset`).
         pairs: number of pairs (their source shapes are timed).
         ks: basis sizes of ``heat`` and ``ours`` (the eigenbasis is computed at the largest).
-        params: engine settings (:func:`._engine.settings`; ``None``: the paper's).
+        params: engine settings (`._engine.settings`; ``None``: the paper's).
         n_bsf: BSF centres (share of the vertices or count).
         seed: seed of the pairs and the FPS.
         cache_dir: unused (the eigenbasis is timed, so never read from a cache).
@@ -104,7 +104,7 @@ def frame_time_experiment(dataset: Dataset, *, pairs: int = 2, ks=DEFAULT_KS, pa
 
 
 def run(dataset: Dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> list[dict]:
-    """``reproduce``'s call: :func:`frame_time_experiment` (``functions`` is not used)."""
+    """``reproduce``'s call: `frame_time_experiment` (``functions`` is not used)."""
     return frame_time_experiment(dataset, pairs=pairs, ks=ks, seed=seed, cache_dir=cache_dir,
                                  progress=progress)
 

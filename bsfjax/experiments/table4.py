@@ -17,9 +17,9 @@ from ._engine import TRANSFER_METHODS
 from ._io import Report, pivot_markdown
 from ._shapes import _Maps, _check_ks, _check_methods, _functions, _k_needed, prepare_shapes
 from .table3 import _timeit
-from .._estimation import estimate_fmap
-from .._fmap import fmap_to_p2p
-from .._geodesics import geodesic_distances
+from .._maps import estimate_fmap
+from .._maps import fmap_to_p2p
+from .._sampling import geodesic_distances
 
 __all__ = ["transfer_time_experiment"]
 
@@ -40,11 +40,11 @@ def transfer_time_experiment(dataset: Dataset, *, pairs: int = 2, ks=DEFAULT_KS,
     The map estimation is timed once per pair as ``fmap (estimate_fmap)``.
 
     Arguments:
-        dataset: the ``--data`` folder (:func:`load_dataset`).
+        dataset: the ``--data`` folder (`load_dataset`).
         pairs: number of pairs.
         ks: basis sizes (square estimated maps).
-        methods: a subset of :data:`TRANSFER_METHODS`.
-        params: engine settings (:func:`._engine.settings`; ``None``: the paper's).
+        methods: a subset of `TRANSFER_METHODS`.
+        params: engine settings (`._engine.settings`; ``None``: the paper's).
         n_bsf: BSF centres (share of the vertices or count).
         seed: seed of the pairs, the function and the FPS.
         cache_dir: eigenbasis cache folder.
@@ -100,7 +100,7 @@ def transfer_time_experiment(dataset: Dataset, *, pairs: int = 2, ks=DEFAULT_KS,
 
 
 def run(dataset: Dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> list[dict]:
-    """``reproduce``'s call: :func:`transfer_time_experiment` (one function per pair)."""
+    """``reproduce``'s call: `transfer_time_experiment` (one function per pair)."""
     return transfer_time_experiment(dataset, pairs=pairs, ks=ks, seed=seed,
                                     cache_dir=cache_dir, progress=progress)
 

@@ -1,5 +1,5 @@
 """Table 5 of Melzi 2019: transfer error on TOSCA classes with estimated ``k × k`` maps
-(k ∈ {10, 30}), for two BSF parameter sets (:data:`PARAMETER_SETS`).
+(k ∈ {10, 30}), for two BSF parameter sets (`PARAMETER_SETS`).
 
 ``pairs`` pairs are taken *per class* (a ``--data`` folder with class subfolders, e.g.
 ``tosca_5k/``); maps are estimated from WKS + WKS at 5 landmarks with descriptor
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from ._datasets import Dataset
 from ._engine import PARAMETER_SETS, PLAIN_METHODS, TRANSFER_METHODS
-from .._errors import BSFError
+from .._util import BSFError
 from ._io import Report, pivot_markdown
 from ._shapes import _Maps, _check_ks, _check_methods, _k_needed, prepare_shapes
 from .table2 import _transfer_rows
@@ -32,19 +32,19 @@ def tosca_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 100, 
     ``std2``, ``p2p``, ``prod``) run once and are reported with ``param_set = "-"``.
 
     Arguments:
-        dataset: the ``--data`` folder with class subfolders (:func:`load_dataset`).
+        dataset: the ``--data`` folder with class subfolders (`load_dataset`).
         pairs: number of pairs per class.
         functions: random indicators per source shape.
         ks: basis sizes (square estimated maps).
-        methods: a subset of :data:`TRANSFER_METHODS`.
+        methods: a subset of `TRANSFER_METHODS`.
         parameter_sets: ``{name: {"n_bsf": ..., "params": settings}}``; ``None``:
-            :data:`PARAMETER_SETS`.
+            `PARAMETER_SETS`.
         seed: seed of the pairs, the functions and the FPS.
         cache_dir: eigenbasis cache folder.
         progress: show progress bars.
 
     Returns:
-        Rows of :func:`transfer_experiment` (``maps = "estimated"``) plus ``"param_set"``.
+        Rows of `transfer_experiment` (``maps = "estimated"``) plus ``"param_set"``.
     """
     ks = _check_ks(ks)
     methods = _check_methods(methods, TRANSFER_METHODS)
@@ -75,7 +75,7 @@ def tosca_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 100, 
 
 
 def run(dataset: Dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> list[dict]:
-    """``reproduce``'s call: :func:`tosca_experiment` (``pairs`` per class)."""
+    """``reproduce``'s call: `tosca_experiment` (``pairs`` per class)."""
     return tosca_experiment(dataset, pairs=pairs, functions=functions, ks=ks, seed=seed,
                             cache_dir=cache_dir, progress=progress)
 

@@ -1,0 +1,11 @@
+"""The `bsfjax` command line: `demo`, `example`, `transfer`, `reproduce`, `spectrum`."""
+
+from ._demo import example_landmarks, format_table, run_demo
+from ._io import CLIError, TURN_DOUBT
+from ._main import main
+from ._parser import build_parser
+
+__all__ = [
+    "CLIError", "TURN_DOUBT", "build_parser", "example_landmarks", "format_table", "main",
+    "run_demo",
+]

@@ -1,0 +1,188 @@
+"""``bsfjax transfer``: one target (``--out``) here, many (``--out-dir``) in ``_many``."""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from pathlib import Path
+
+from ._io import (TURN_DOUBT, CLIError, _read_array, _write_array, coloured_data, is_json, one_start,
+                  read_truth, read_values)
+from .._mesh import is_face_file
+
+
+#: Methods that need inputs the command line does not give (``std2``: a 2k × 2k map).
+CLI_EXCLUDED = ("std2",)
+
+
+def _parse_landmarks(text: str | None):
+    if text is None:
+        return None
+    try:
+        left, right = text.split(":")
+        src = [int(t) for t in left.split(",") if t.strip()]
+        tgt = [int(t) for t in right.split(",") if t.strip()]
+    except ValueError:
+        raise CLIError(f"--landmarks must look like 'i,j,...:i2,j2,...', got {text!r}") from None
+    if len(src) != len(tgt) or not src:
+        raise CLIError(f"--landmarks: {len(src)} source and {len(tgt)} target indices; the two "
+                       "lists must have the same, non-zero length")
+    return src, tgt
+
+
+def _cmd_transfer(args) -> int:
+    from .._transfer import METHODS
+
+    names = tuple(m for m in METHODS if m not in CLI_EXCLUDED)
+    if args.method is None:  # a given point map is trusted as it is; an estimated one is refined
+        args.method = "p2p" if args.map[0] == "p2p" else "refined"
+    if args.method not in names:
+        raise CLIError(f"--method must be one of {', '.join(names)}, got {args.method!r}")
+    if args.out_dir is not None:
+        from ._many import cmd_transfer_many
+
+        if args.map != ["estimate"]:
+            raise CLIError("with --out-dir the map is estimated per target (--map estimate); "
+                           "transfer through given maps one target at a time (--out)")
+        if args.truth_dir is not None and not args.labels:
+            raise CLIError("--truth-dir compares labels: use it with --labels")
+        return cmd_transfer_many(args, CLIError)
+    return _transfer_one(args)
+
+
+def _transfer_one(args) -> int:
+    import numpy as np
+
+    from .._pipeline import transfer_labels, transfer_values
+    from .._maps import estimate_map
+    from .._mesh import load_mesh
+    from .._mesh import save_mesh
+    from .._spectral import spectrum
+
+    if Path(args.out).suffix not in (".npy", ".txt") and not (
+            args.labels and (is_json(args.out) or is_face_file(args.out))):
+        raise CLIError(f"--out {args.out}: use a .txt or .npy file name (labels: also .json or "
+                       ".seg)")
+    if args.truth and not args.labels:
+        raise CLIError("--truth compares labels: use it with --labels")
+    if args.mesh_out and Path(args.mesh_out).suffix.lower() != ".ply":
+        raise CLIError(f"--mesh-out {args.mesh_out}: use a .ply file name")
+    kind, *rest = args.map
+    if kind not in ("estimate", "p2p", "fmap") or (kind == "estimate") != (len(rest) == 0) or len(rest) > 1:
+        raise CLIError("--map must be 'estimate', 'p2p FILE' or 'fmap FILE'")
+    landmarks = _parse_landmarks(args.landmarks)
+    source, target = load_mesh(args.source), load_mesh(args.target)
+    if landmarks is not None:
+        from .._util import check_indices
+
+        check_indices(landmarks[0], "--landmarks (source)", source.n_vertices)
+        check_indices(landmarks[1], "--landmarks (target)", target.n_vertices)
+    values, names, per_face = read_values(args, source)
+    if args.labels and (is_json(args.out) if per_face else is_face_file(args.out)):
+        kinds = "triangle: write .seg," if per_face else "vertex: write .json,"
+        raise CLIError(f"--out {args.out}: the labels are per {kinds} .txt or .npy")
+    truth = None
+    if args.truth:
+        truth = read_truth(args.truth, names)
+        where, n = ("triangle", target.n_faces) if per_face else ("vertex", target.n_vertices)
+        if truth.shape != (n,):
+            raise CLIError(f"truth file {args.truth}: expected one label per target {where} "
+                           f"({n}), got shape {truth.shape}")
+    k = args.k
+    kmax = min(source.n_vertices, target.n_vertices) - 1
+    if not 1 <= k <= kmax:
+        raise CLIError(f"-k must be in [1, {kmax}], got {k}")
+    C = p2p = None
+    k_spec = min(2 * k, kmax) if kind == "estimate" else k
+    if kind == "fmap":
+        C = _read_array(rest[0], "fmap")
+        if C.ndim != 2 or C.shape[0] != C.shape[1]:
+            raise CLIError(f"fmap file {rest[0]}: expected a square k x k matrix, got shape {C.shape}")
+        k = k_spec = C.shape[0]
+    k_map = k_spec  # the estimated map's ZoomOut size; 'refined' continues it further
+    if args.method == "refined":
+        from .._maps import REFINE_EIGENPAIRS
+
+        k_spec = min(max(k_spec, REFINE_EIGENPAIRS), kmax)
+    if kind == "p2p":  # read and checked before the spectra, so a bad file costs nothing
+        p2p = _read_array(rest[0], "p2p", dtype=int)
+        if p2p.shape != (target.n_vertices,):
+            raise CLIError(f"p2p file {rest[0]}: expected {target.n_vertices} source vertex indices in "
+                           f"[0, {source.n_vertices}), got shape {p2p.shape}")
+        from .._util import check_indices
+
+        try:
+            p2p = check_indices(p2p, "p2p", source.n_vertices, what="source vertex indices")
+        except ValueError as exc:
+            raise CLIError(f"p2p file {rest[0]}: {exc}") from None
+    sm = spectrum(source, k_spec, cache_dir=args.spectrum_cache)
+    sn = spectrum(target, k_spec, cache_dir=args.spectrum_cache)
+    print(f"spectra: {source.n_vertices} and {target.n_vertices} vertices, k = {k_spec}", file=sys.stderr)
+    if kind == "p2p":
+        from .._maps import fmap_from_p2p
+
+        C = np.asarray(fmap_from_p2p(sm, sn, p2p))
+    elif kind == "estimate":
+        if landmarks is None:
+            warnings.warn("no --landmarks: an intrinsically symmetric shape may be matched to its "
+                          "mirror image or turned front to back (an orientation term and a choice "
+                          "among several starts make it less likely; two landmark pairs remove "
+                          "it)", stacklevel=1)
+        est = estimate_map(sm.truncate(k_map), sn.truncate(k_map), k=k, landmarks=landmarks,
+                           refine_to=k_map, source_mesh=source, target_mesh=target,
+                           starts=one_start(args, k))
+        C, p2p = est.C, est.p2p
+        print(f"estimated a {k}x{k} map (ZoomOut to {k_map})", file=sys.stderr)
+        if est.start is not None:
+            second = ("" if est.landmarks is None else
+                      f", then {len(est.landmarks[0])} landmarks read off its map")
+            turn = ", then swapped left and right (it was turned)" if est.swapped else ""
+            print(f"no landmarks: kept start k0 = {est.start[0]}, WKS variance "
+                  f"{est.start[1]:g}{second}{turn}; geodesic distortion {est.distortion:.4f}, "
+                  f"orientation agreement {est.orientation:.1%}", file=sys.stderr)
+            if est.turn_doubtful:
+                warnings.warn(TURN_DOUBT, stacklevel=1)
+    common = dict(C=C, p2p=p2p, method=args.method, mesh=source)
+    if args.method == "refined":  # its continuation runs on the samples of the map's ZoomOut
+        from .._maps import ZOOMOUT_SAMPLES
+        from .._sampling import subsample
+
+        common["samples"] = (est.samples if kind == "estimate" else
+                             (subsample(source, ZOOMOUT_SAMPLES),
+                              subsample(target, ZOOMOUT_SAMPLES)))
+    if args.labels and per_face:
+        from .._pipeline import transfer_face_labels
+
+        del common["mesh"]
+        res = transfer_face_labels(sm, sn, values, source_mesh=source, target_mesh=target,
+                                   threshold=args.threshold, **common)
+    elif args.labels:
+        res = transfer_labels(sm, sn, values, threshold=args.threshold, **common)
+    if args.labels:
+        result = res.labels.astype(np.int64)
+        print(f"transferred {np.unique(values).size} labels "
+              f"{'of triangles ' if per_face else ''}with {args.method}; unassigned: "
+              f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
+        if res.regime is not None:
+            why = [] if res.agreement is None else [f"{res.agreement:.1%} of the area as the "
+                                                    "input map's pull-back"]
+            if res.confidence is not None and res.confidence < 1:  # a vote (n_vote > 1)
+                why.append(f"vote confidence {res.confidence:.2f}")
+            print(f"regime: {res.regime}" + (f" ({', '.join(why)})" if why else ""),
+                  file=sys.stderr)
+        if truth is not None:
+            area = target.face_areas() if per_face else np.asarray(sn.mass)
+            correct = result == truth
+            print(f"accuracy against {args.truth}: {np.sum(area * correct) / np.sum(area):.1%} of "
+                  f"the target area ({np.mean(correct):.1%} of its "
+                  f"{'triangles' if per_face else 'vertices'})", file=sys.stderr)
+    else:
+        result = transfer_values(sm, sn, values, **common)
+        result = result.T if result.ndim == 2 else result
+    if args.mesh_out:
+        coloured = coloured_data(result, bool(args.labels))
+        save_mesh(args.mesh_out, target, **({"cell_data": coloured} if per_face
+                                             else {"point_data": coloured}))
+    _write_array(args.out, result, names)
+    print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else ""), file=sys.stderr)
+    return 0

@@ -1,0 +1,24 @@
+"""Shared helpers below every stage: errors, argument checks, atomic files, threads, memory, devices, Ctrl-C."""
+
+from ._signals import exit_now, install_sigint_handler, is_cli_process
+from ._buckets import BUCKET_FACTORS, MERGE_PADDING, merge_buckets, size_bucket
+from ._devices import map_over_devices, n_devices, pad_leading, shard_leading
+from ._errors import BSFError, MeshError
+from ._files import atomic_path, check_outputs, output_transaction, write_text_atomic
+from ._memory import release_free_memory
+from ._threads import eigensolve_on_one_thread, on_one_blas_thread, one_blas_thread
+from ._validate import (
+    check_finite, check_indices, check_int, check_real, check_source_mesh, compact_labels,
+    homogeneous, is_traced, magnitude_limit, non_integer_entry, pow2_scale, restore_scale,
+    unit_scale,
+)
+
+__all__ = [
+    "BSFError", "BUCKET_FACTORS", "MERGE_PADDING", "MeshError", "atomic_path", "check_finite",
+    "check_indices", "check_int", "check_outputs", "check_real", "check_source_mesh",
+    "compact_labels", "eigensolve_on_one_thread", "exit_now", "homogeneous",
+    "install_sigint_handler", "is_cli_process", "is_traced", "magnitude_limit",
+    "map_over_devices", "merge_buckets", "n_devices", "non_integer_entry", "on_one_blas_thread",
+    "one_blas_thread", "output_transaction", "pad_leading", "pow2_scale", "release_free_memory",
+    "restore_scale", "shard_leading", "size_bucket", "unit_scale", "write_text_atomic",
+]
