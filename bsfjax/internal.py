@@ -6,29 +6,33 @@ importable from one place so that no code outside the package reaches into its p
 """
 
 from ._util import (
-    BSFError, BUCKET_FACTORS, MERGE_PADDING, atomic_path, merge_buckets,
-    on_one_blas_thread, one_blas_thread, write_text_atomic,
+    BUCKET_FACTORS, MERGE_PADDING, atomic_path, merge_buckets, on_one_blas_thread,
+    one_blas_thread, size_bucket, write_text_atomic,
 )
 from ._mesh import (
-    JOINTS, LABEL_NAMES, Mesh, POSES, clean_mesh, edge_graph, example_mesh, example_pair,
-    mesh_edges, mesh_report, subdivide,
+    JOINTS, LABEL_NAMES, POSES, clean_mesh, edge_graph, is_face_file, mesh_edges,
+    subdivide,
 )
 from ._spectral import (
-    cotangent_stiffness, has_cholmod, interval_operators, interval_spectrum, mass_matrix,
+    cotangent_stiffness, has_cholmod, interval_operators, mass_matrix,
 )
 from ._maps import (
-    LANDMARK_FREE_STARTS, ORIENTATION_SLACK, ORIENT_WEIGHT, TURN_RADIUS, TURN_SAMPLES,
-    ZOOMOUT_SAMPLES, hks_times, refinement_sizes, wks_energies,
+    LANDMARK_FREE_STARTS, ORIENTATION_SLACK, ORIENT_WEIGHT, OrientationBasis, TURN_RADIUS,
+    TURN_SAMPLES, ZOOMOUT_SAMPLES, hks_times, nearest_neighbors, orientation_bases,
+    refinement_sizes, wks_energies,
 )
 from ._frame import (
-    ADAPTIVE_N_SCALES, decode_host, decode_traced, effective_taus, ell_matmul,
-    ell_rmatmul, kernel_mask, pack_lists, sparse_atoms, sparse_gram,
+    ADAPTIVE_N_SCALES, DENSE_BUDGET_BYTES, decode_host, decode_traced, effective_taus,
+    ell_matmul, ell_rmatmul, kernel_mask, pack_lists, sparse_atoms, sparse_gram, unique_atoms,
+)
+from ._coding import (
+    CODERS, as_coder,
 )
 from ._transfer import (
-    METHODS, geodesic_ball_radii, product_basis,
+    as_method, geodesic_ball_radii, product_basis,
 )
 from ._pipeline import (
-    REGIMES,
+    FaceShares, decide_face_labels, face_label_shares, face_scores,
 )
 from ._plot import (
     label_colour,
@@ -38,14 +42,17 @@ from ._cli import (
 )
 
 __all__ = [
-    "ADAPTIVE_N_SCALES", "BSFError", "BUCKET_FACTORS", "CLIError", "JOINTS", "LABEL_NAMES",
-    "LANDMARK_FREE_STARTS", "MERGE_PADDING", "METHODS", "Mesh", "ORIENTATION_SLACK",
-    "ORIENT_WEIGHT", "POSES", "REGIMES", "TURN_DOUBT", "TURN_RADIUS", "TURN_SAMPLES",
-    "ZOOMOUT_SAMPLES", "atomic_path", "clean_mesh", "cotangent_stiffness", "decode_host",
-    "decode_traced", "edge_graph", "effective_taus", "ell_matmul", "ell_rmatmul",
-    "example_landmarks", "example_mesh", "example_pair", "format_table", "geodesic_ball_radii",
-    "has_cholmod", "hks_times", "interval_operators", "interval_spectrum", "kernel_mask",
-    "label_colour", "mass_matrix", "merge_buckets", "mesh_edges", "mesh_report",
-    "on_one_blas_thread", "one_blas_thread", "pack_lists", "product_basis", "refinement_sizes",
-    "run_demo", "sparse_atoms", "sparse_gram", "subdivide", "wks_energies", "write_text_atomic",
+    "ADAPTIVE_N_SCALES", "BUCKET_FACTORS", "CLIError", "CODERS", "DENSE_BUDGET_BYTES",
+    "FaceShares", "JOINTS",
+    "LABEL_NAMES", "LANDMARK_FREE_STARTS", "MERGE_PADDING", "ORIENTATION_SLACK",
+    "ORIENT_WEIGHT", "OrientationBasis", "POSES", "TURN_DOUBT", "TURN_RADIUS", "TURN_SAMPLES",
+    "ZOOMOUT_SAMPLES", "as_coder", "as_method", "atomic_path", "clean_mesh",
+    "cotangent_stiffness", "decide_face_labels", "decode_host", "decode_traced", "edge_graph",
+    "effective_taus", "ell_matmul", "ell_rmatmul", "example_landmarks", "face_label_shares",
+    "face_scores", "format_table", "geodesic_ball_radii", "has_cholmod", "hks_times",
+    "interval_operators", "is_face_file", "kernel_mask", "label_colour", "mass_matrix",
+    "merge_buckets", "mesh_edges", "nearest_neighbors", "on_one_blas_thread", "one_blas_thread",
+    "orientation_bases", "pack_lists", "product_basis", "refinement_sizes", "run_demo",
+    "size_bucket", "sparse_atoms", "sparse_gram", "subdivide", "unique_atoms", "wks_energies",
+    "write_text_atomic",
 ]

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import bsfjax
-from bsfjax.internal import REGIMES
+from bsfjax import REGIMES
 from bsfjax.cli import main
 
 

@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 
 import bsfjax
-from bsfjax import (CODERS, BSFError, ErrorOMP, LeastSquares, Lasso, OMP, AbstractCoder,
-                    SparseFrame, as_coder, build_frame, decode, encode, prune_frame,
-                    transfer_frame)
+from bsfjax import BSFError, ErrorOMP, LeastSquares, Lasso, OMP, AbstractCoder, SparseFrame, build_frame, decode, encode, prune_frame, transfer_frame
+from bsfjax.internal import CODERS, as_coder
 
 from .conftest import icosphere
 from .coding_common import as_frame, random_frame, random_functions

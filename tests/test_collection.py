@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import bsfjax
-from bsfjax import BSFError, size_bucket, transfer_collection
+from bsfjax import BSFError, transfer_collection
+from bsfjax.internal import size_bucket
 from bsfjax.internal import BUCKET_FACTORS
 
 

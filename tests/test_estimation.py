@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import bsfjax
+import bsfjax.internal
 from bsfjax import (BSFError, FmapWeights, estimate_fmap, fmap_energy, fmap_from_p2p, fmap_to_p2p,
                     geodesic_error, wks, zoomout)
 
@@ -323,7 +324,7 @@ def test_shared_orientation_bases_equal_the_meshes(small, x64):
     d0, d2 = descriptors(s0, [5]), descriptors(s2, [5])
     w = FmapWeights(orient=1.0)
     with jax.enable_x64(x64):
-        bases = bsfjax.orientation_bases(s0, s2, m0, big, 24)
+        bases = bsfjax.internal.orientation_bases(s0, s2, m0, big, 24)
         assert bases[0].Y.shape == (642, 24, 24)
         for k in (10, 24):
             C = np.asarray(estimate_fmap(s0, s2, d0, d2, k=k, weights=w, source_mesh=m0,
@@ -340,7 +341,7 @@ def test_shared_orientation_bases_equal_the_meshes(small, x64):
 def test_orientation_bases_bad_input(small):
     (m0, _, m2), (s0, _, s2), _ = small
     d0, d2 = descriptors(s0, [1]), descriptors(s2, [1])
-    bases = bsfjax.orientation_bases(s0, s2, m0, m2, 8)
+    bases = bsfjax.internal.orientation_bases(s0, s2, m0, m2, 8)
     w = FmapWeights(orient=1.0)
     with pytest.raises(BSFError, match="at least 10 eigenvectors"):
         estimate_fmap(s0, s2, d0, d2, k=10, weights=w, orientation_bases=bases)
@@ -352,6 +353,6 @@ def test_orientation_bases_bad_input(small):
     with pytest.raises(BSFError, match="orientation_bases must be the pair's"):
         estimate_fmap(s0, s2, d0, d2, k=8, weights=w, orientation_bases=(m0, m2))
     with pytest.raises(BSFError, match="k must be in"):
-        bsfjax.orientation_bases(s0, s2, m0, m2, 31)
+        bsfjax.internal.orientation_bases(s0, s2, m0, m2, 31)
     with pytest.raises(BSFError, match="has 42 vertices but its spectrum has 642"):
-        bsfjax.orientation_bases(s0, s2, m0, bsfjax.Mesh(*icosphere(1)), 8)
+        bsfjax.internal.orientation_bases(s0, s2, m0, bsfjax.Mesh(*icosphere(1)), 8)

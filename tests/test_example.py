@@ -12,9 +12,11 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 import bsfjax
-from bsfjax.internal import BSFError
-from bsfjax.internal import JOINTS, LABEL_NAMES, POSES, example_mesh, example_pair
-from bsfjax.internal import Mesh, clean_mesh
+from bsfjax import BSFError
+from bsfjax import example_mesh, example_pair
+from bsfjax.internal import JOINTS, LABEL_NAMES, POSES
+from bsfjax import Mesh
+from bsfjax.internal import clean_mesh
 
 
 @pytest.fixture(scope="module")

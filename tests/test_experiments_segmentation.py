@@ -56,7 +56,7 @@ def test_run_on_the_example_pair(tmp_path):
     assert by[("truth", "p2p")]["accuracy"] == pytest.approx(100)
     assert by[("crude", "refined")]["accuracy"] >= by[("crude", "p2p")]["accuracy"] - 1
     assert all(r["unassigned"] == 0 for r in rows if r["method"] != "std")
-    assert {r["regime"] for r in rows if r["method"] == "refined"} <= set(bj._highlevel.REGIMES)
+    assert {r["regime"] for r in rows if r["method"] == "refined"} <= set(bj.REGIMES)
     rep = report(rows, (20,))
     assert "| default | refined |" in rep.markdown
     png = rep.figure(tmp_path / "seg.png")

@@ -8,7 +8,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 import bsfjax
-from bsfjax import BSFError, fmap_from_p2p, fmap_to_p2p, icp_refine, nearest_neighbors, zoomout
+from bsfjax import BSFError, fmap_from_p2p, fmap_to_p2p, icp_refine, zoomout
+from bsfjax.internal import nearest_neighbors
 
 from .conftest import data_path, icosphere
 

@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from bsfjax import BSFError, is_face_file, load_labels, save_labels
+from bsfjax import BSFError, load_labels, save_labels
+from bsfjax.internal import is_face_file
 
 from .conftest import data_path
 

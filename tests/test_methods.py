@@ -9,7 +9,8 @@ import pytest
 import bsfjax
 from bsfjax import BSFError
 from bsfjax import BSF, LeastSquares, Pair, transfer
-from bsfjax.internal import METHODS, geodesic_ball_radii, product_basis
+from bsfjax import METHODS
+from bsfjax.internal import geodesic_ball_radii, product_basis
 
 from .conftest import icosphere
 

@@ -15,10 +15,10 @@ from scipy.spatial import ConvexHull
 
 from bsfjax import plot
 from bsfjax.internal import label_colour
-from bsfjax.internal import BSFError
-from bsfjax.internal import example_mesh, example_pair
-from bsfjax.internal import Mesh
-from bsfjax.internal import interval_spectrum
+from bsfjax import BSFError
+from bsfjax import example_mesh, example_pair
+from bsfjax import Mesh
+from bsfjax import interval_spectrum
 
 
 @pytest.fixture(scope="module")

@@ -22,8 +22,10 @@ import numpy as np
 import pytest
 
 import bsfjax
+import bsfjax.internal
 from bsfjax import BSFError, MeshError
-from bsfjax.internal import clean_mesh, mesh_report
+from bsfjax import mesh_report
+from bsfjax.internal import clean_mesh
 
 from .conftest import icosphere
 
@@ -211,7 +213,7 @@ BAD_INPUTS = [
     ("icp-negative-iterations", lambda s: bsfjax.icp_refine(np.eye(5), s.spec, s.spec,
                                                             n_iter=-1),
      BSFError, r"n_iter must be a non-negative integer, got -1"),
-    ("nearest-neighbors-nan", lambda s: bsfjax.nearest_neighbors(np.full((3, 2), np.nan),
+    ("nearest-neighbors-nan", lambda s: bsfjax.internal.nearest_neighbors(np.full((3, 2), np.nan),
                                                                  np.ones((2, 2))),
      BSFError, r"reference contains 6 NaN or infinite values"),
     ("estimate-nan-descriptors", lambda s: bsfjax.estimate_fmap(

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import bsfjax
+import bsfjax.internal
 from bsfjax import Pair, transfer, transfer_labels, transfer_pairs, transfer_values
 from bsfjax.cli import main
 
@@ -40,7 +41,7 @@ def case():
 
 def _manual(method, sm, sn, C, gt, centers, F):
     """The array-level route for the BSF methods, or None."""
-    m = bsfjax.as_method(method[0], **method[1])
+    m = bsfjax.internal.as_method(method[0], **method[1])
     if not isinstance(m, bsfjax.BSF):
         return None
     frame = bsfjax.build_frame(sm, centers, m.taus, m.gamma, tau_convention=m.tau_convention)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import bsfjax
+import bsfjax.internal
 from bsfjax import BSFError, Frame, build_frame, decode, encode, transfer_frame
 from bsfjax import BSF, Pair, transfer
 from bsfjax.internal import ADAPTIVE_N_SCALES
@@ -140,11 +141,11 @@ def test_unique_atoms_matches_brute_force():
     B[:, 7] = B[:, 2]
     B[:, 5] = 0
     B[:, 11] = 0
-    keep, rep = bsfjax.unique_atoms(B)
+    keep, rep = bsfjax.internal.unique_atoms(B)
     k0, r0 = _brute_unique(B)
     np.testing.assert_array_equal(keep, k0)
     np.testing.assert_array_equal(rep, r0)
-    kj, rj = jax.jit(bsfjax.unique_atoms)(jnp.asarray(B))
+    kj, rj = jax.jit(bsfjax.internal.unique_atoms)(jnp.asarray(B))
     np.testing.assert_array_equal(kj, k0)
     np.testing.assert_array_equal(rj, r0)
 
@@ -204,7 +205,7 @@ def test_build_frame_prune_and_transfer_keep_the_code_aligned(sphere):
     taus = (2e-3, 2e-3, 3e-2)  # a repeated scale: every atom of the second is a tie
     full = build_frame(spec, c, taus)
     pr = build_frame(spec, c, taus, prune=True)
-    keep, _ = bsfjax.unique_atoms(full)
+    keep, _ = bsfjax.internal.unique_atoms(full)
     assert pr.n_atoms == int(np.sum(keep)) <= 2 * len(c)
     assert not np.any((np.asarray(pr.columns) >= len(c)) & (np.asarray(pr.columns) < 2 * len(c)))
     np.testing.assert_array_equal(pr.atoms, np.asarray(full.atoms)[:, pr.columns])
@@ -284,12 +285,12 @@ def test_baseline_adaptive_prune_and_p2p_transfer(sphere):
     tgt = bsfjax.Spectrum(spec.evals, spec.evecs[perm], spec.mass[perm])
     C = np.asarray(bsfjax.fmap_from_p2p(spec, tgt, perm))
     pair = Pair(source=spec, target=tgt, C=C, centers=c, p2p=perm)
-    params = bsfjax.as_method("omp", taus="adaptive", prune=True, frame_transfer="p2p",
+    params = bsfjax.internal.as_method("omp", taus="adaptive", prune=True, frame_transfer="p2p",
                               sparsity=8)
     res = transfer(params, pair, F, k=30)
     with jax.enable_x64(True):
         fr = build_frame(spec, c, "adaptive")
-        keep, _ = bsfjax.unique_atoms(fr)
+        keep, _ = bsfjax.internal.unique_atoms(fr)
         atoms = np.asarray(fr.atoms) * np.asarray(keep)
         alpha = encode(atoms, F, "omp", sparsity=8, weights=spec.mass)
     np.testing.assert_allclose(res.approximation, np.asarray(alpha) @ atoms.T, atol=1e-6)
@@ -306,7 +307,7 @@ def test_baseline_adaptive_prune_and_p2p_transfer(sphere):
                                     {"target_atoms": 0}])
 def test_method_options_bad_input(kwargs):
     with pytest.raises(BSFError):
-        bsfjax.as_method("lasso", **kwargs)
+        bsfjax.internal.as_method("lasso", **kwargs)
 
 
 # ------------------------------------------------------------------------------ FAUST claims

@@ -69,15 +69,16 @@ def run_demo(out_dir: str | Path | None = "bsfjax-demo", *, levels: int = 3, k: 
              progress: bool = True) -> dict:
     """Run the demonstration pipeline and return its results (also written to ``out_dir``).
 
-    Args:
-        out_dir: folder for ``results.json`` and the PNG figures (``None``: write nothing).
-        levels: resolution of the built-in pair (3 → 8066 vertices).
-        k: eigenpairs used by every method (the paper's estimated-map setting is k = 30).
-        k_refine: ZoomOut's target size for refining the estimated map.
-        n_functions: random connected indicators (5–25 % of the area each).
-        seed: seed of the functions and of farthest point sampling.
-        figures: write PNG figures.
-        progress: print each stage and its time.
+    **Arguments:**
+
+    - `out_dir`: folder for ``results.json`` and the PNG figures (``None``: write nothing).
+    - `levels`: resolution of the built-in pair (3 → 8066 vertices).
+    - `k`: eigenpairs used by every method (the paper's estimated-map setting is k = 30).
+    - `k_refine`: ZoomOut's target size for refining the estimated map.
+    - `n_functions`: random connected indicators (5–25 % of the area each).
+    - `seed`: seed of the functions and of farthest point sampling.
+    - `figures`: write PNG figures.
+    - `progress`: print each stage and its time.
     """
     from .._mesh import example_pair
     from .._maps import fmap_from_p2p, fmap_to_p2p
@@ -164,7 +165,7 @@ def run_demo(out_dir: str | Path | None = "bsfjax-demo", *, levels: int = 3, k: 
 
 
 def _figures(out: Path, pair, frame, centers, F, gt, outputs, timer) -> list[str]:
-    from .. import plot
+    from .._plot import plot_atoms, plot_error, plot_function, plot_segmentation
     from .._frame import SparseFrame
 
     names = pair.label_names
@@ -175,31 +176,31 @@ def _figures(out: Path, pair, frame, centers, F, gt, outputs, timer) -> list[str
         files[name] = True
 
     def draw():
-        save("segmentation_source.png", plot.plot_segmentation, pair.source, pair.labels,
+        save("segmentation_source.png", plot_segmentation, pair.source, pair.labels,
              label_names=names, title="source: built-in segmentation")
         for (map_name, method), (_, labels_out) in outputs.items():
             if method != "omp":
                 continue
             tag = "gt_map" if map_name == "ground truth" else "estimated_map"
-            save(f"segmentation_target_bsf_{tag}.png", plot.plot_segmentation, pair.target, labels_out,
+            save(f"segmentation_target_bsf_{tag}.png", plot_segmentation, pair.target, labels_out,
                  label_names=names, title=f"target: BSF transfer ({map_name} map)")
         j = 0
         f_true = F[j][gt]
-        save("indicator_source.png", plot.plot_function, pair.source, F[j], title="source: indicator",
+        save("indicator_source.png", plot_function, pair.source, F[j], title="source: indicator",
              vmin=0, vmax=1)
         for method in ("std", "omp"):
             res = outputs[("ground truth", method)][0]
-            save(f"indicator_transfer_{method}.png", plot.plot_function, pair.target,
+            save(f"indicator_transfer_{method}.png", plot_function, pair.target,
                  np.asarray(res.transferred[j]), vmin=-0.25, vmax=1.25,
                  title=f"target: {'spectral projection' if method == 'std' else 'BSF (omp)'} transfer")
-            save(f"indicator_error_{method}.png", plot.plot_error, pair.target, f_true,
+            save(f"indicator_error_{method}.png", plot_error, pair.target, f_true,
                  np.asarray(res.transferred[j]), title=f"|error| of the {method} transfer", vmax=1.0)
         c = 0
         n_c = len(centers)
         js = [c + s * n_c for s in range(3)]
         cols = (frame.atom_columns(js) if isinstance(frame, SparseFrame)
                 else np.asarray(frame.atoms)[:, js])
-        save("atoms.png", plot.plot_atoms, pair.source, cols, [1e-3, 5e-3, 1e-2], center=int(centers[c]))
+        save("atoms.png", plot_atoms, pair.source, cols, [1e-3, 5e-3, 1e-2], center=int(centers[c]))
 
     timer("figures", draw)
     return sorted(files)

@@ -120,7 +120,7 @@ def _remove_stale_temporaries(targets, out_dir: Path, mesh_dir: Path | None,
                               suffix: str) -> None:
     """Remove what a killed run (SIGKILL: no clean-up) left of its atomic writes: the
     ``.<name>.<8 random characters>.tmp<suffix>`` files of this run's outputs (the names of
-    `bsfjax._files.atomic_path`), never the outputs themselves."""
+    `bsfjax._util._files.atomic_path`), never the outputs themselves."""
     names = [(out_dir, "summary.json")] + [(out_dir, f"{p.stem}{suffix}") for p in targets]
     if mesh_dir is not None:
         names += [(mesh_dir, f"{p.stem}.ply") for p in targets]
@@ -149,7 +149,7 @@ def cmd_transfer_many(args, error) -> int:
     landmarks = _read_landmarks_file(args.landmarks_file, targets, error)
     source = load_mesh(args.source)
     from ._io import read_values
-    from ._main import TURN_DOUBT, one_start
+    from ._io import TURN_DOUBT, one_start
 
     values, part_names, per_face = read_values(args, source)
     # .json labels come back as .json, triangles' labels as .seg

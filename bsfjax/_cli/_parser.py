@@ -11,14 +11,16 @@ from ._transfer import _cmd_transfer
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .. import __version__
+    """The `argparse` parser of the `bsfjax` command, with one sub-command each for `demo`,
+    `example`, `transfer`, `reproduce` and `spectrum`."""
+    from .._util import VERSION
 
     parser = argparse.ArgumentParser(
         prog="bsfjax",
         description="Binary Sparse Frames: sparse representation and transfer of step functions "
                     "(segmentations, part labels, region indicators) between shapes.",
     )
-    parser.add_argument("--version", action="version", version=f"bsfjax {__version__}")
+    parser.add_argument("--version", action="version", version=f"bsfjax {VERSION}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     p = sub.add_parser("demo", help="run the whole pipeline on the built-in example pair (the main job)")

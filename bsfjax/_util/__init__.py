@@ -7,6 +7,7 @@ from ._errors import BSFError, MeshError
 from ._files import atomic_path, check_outputs, output_transaction, write_text_atomic
 from ._memory import release_free_memory
 from ._threads import eigensolve_on_one_thread, on_one_blas_thread, one_blas_thread
+from ._version import VERSION
 from ._validate import (
     check_finite, check_indices, check_int, check_real, check_source_mesh, compact_labels,
     homogeneous, is_traced, magnitude_limit, non_integer_entry, pow2_scale, restore_scale,
@@ -14,6 +15,7 @@ from ._validate import (
 )
 
 __all__ = [
+    "VERSION",
     "BSFError", "BUCKET_FACTORS", "MERGE_PADDING", "MeshError", "atomic_path", "check_finite",
     "check_indices", "check_int", "check_outputs", "check_real", "check_source_mesh",
     "compact_labels", "eigensolve_on_one_thread", "exit_now", "homogeneous",
