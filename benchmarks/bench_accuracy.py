@@ -14,28 +14,25 @@ Writes ``accuracy.json`` (settings, per-(method, k) mean / std / median, wall ti
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from pathlib import Path
 
-from bsfjax.internal import write_text_atomic
+import _harness as h
 from bsfjax.experiments import CODERS
 from bsfjax.experiments import load_dataset, pivot_markdown, summarize, transfer_experiment
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "faust"
-
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default=str(DATA))
-    ap.add_argument("--out", required=True)
+    ap = h.parser(__doc__)
+    h.add_data(ap, "faust", type=str, help="FAUST folder")
+    h.add_out(ap)
     ap.add_argument("--pairs", type=int, default=2)
     ap.add_argument("--functions", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--ks", default="10,30,50,70,90")
     args = ap.parse_args(argv)
-    ks = tuple(int(k) for k in args.ks.split(","))
+    h.require_data(args.data)
+    ks = h.int_list(args.ks)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -50,7 +47,7 @@ def main(argv=None) -> int:
     result = {"data": args.data, "pairs": pairs, "functions_per_pair": args.functions,
               "seed": args.seed, "ks": ks, "error": "sqrt(sum A (f - g)^2) / sqrt(sum A f^2)",
               "approximation": approx, "transfer": transfer, "wall_s": wall}
-    write_text_atomic(out / "accuracy.json", json.dumps(result, indent=1))
+    h.write_json(out / "accuracy.json", result, indent=1)
     std = {s["k"]: s["mean"] for s in approx if s["method"] == "std"}
     beats = [f"- k = {s['k']}: {s['method']} {s['mean']:.3f} vs std {std[s['k']]:.3f} "
              f"({'beats' if s['mean'] < std[s['k']] else 'does NOT beat'} the projection)"
@@ -62,7 +59,7 @@ def main(argv=None) -> int:
           + "\n\n## Transfer with the ground-truth map (Eq. 15)\n\n"
           + pivot_markdown(rows, "method", "k") + "\n\n## BSF vs projection (approximation)\n\n"
           + "\n".join(beats) + f"\n\nWall time {wall:.0f} s.\n")
-    write_text_atomic(out / "accuracy.md", md)
+    h.write_text(out / "accuracy.md", md)
     print(md)
     return 0
 

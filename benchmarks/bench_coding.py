@@ -34,107 +34,26 @@ ratio (> 1: bsfjax is faster) and writes JSON to ``--out``.
 
 from __future__ import annotations
 
-import argparse
-import json
-import os
-import platform
-import time
 import warnings
 from pathlib import Path
 
 import jax
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order
 
+import _harness as h
 import bsfjax
-from bsfjax.internal import atomic_path
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
-def median_time(fn, repeats: int) -> tuple[float, object]:
-    out = jax.block_until_ready(fn())  # warm-up: compiles the jitted paths
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times)), out
-
-
-def random_regions(mesh, mass, count, lo=0.05, hi=0.25, seed=0) -> np.ndarray:
-    """``(count, n)`` indicator functions of connected regions covering ``lo``–``hi`` of the area:
-    vertices in breadth-first order from a random seed until the target area is reached."""
-    f = mesh.faces
-    n = mesh.n_vertices
-    i = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
-    j = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
-    adj = sp.coo_matrix((np.ones(i.size), (i, j)), shape=(n, n)).tocsr()
-    adj = adj + adj.T
-    rng = np.random.default_rng(seed)
-    out = np.zeros((count, n))
-    for r in range(count):
-        order = breadth_first_order(adj, int(rng.integers(n)), directed=False,
-                                    return_predecessors=False)
-        target = rng.uniform(lo, hi) * mass.sum()
-        take = order[: int(np.searchsorted(np.cumsum(mass[order]), target)) + 1]
-        out[r, take] = 1.0
-    return out
-
-
-# --- float64 peers ---------------------------------------------------------------------------
-
-
-def normalized(B):
-    norms = np.linalg.norm(B, axis=0)
-    ok = norms > 0
-    return B[:, ok] / norms[ok], norms, ok
-
-
-def back(beta, norms, ok, q):
-    alpha = np.zeros((q,) + beta.shape[1:])
-    alpha[ok] = beta / norms[ok].reshape((-1,) + (1,) * (beta.ndim - 1))
-    return alpha
-
-
-def sk_omp(B, F, S, precompute):
-    from sklearn.linear_model import orthogonal_mp
-
-    D, norms, ok = normalized(B)
-    beta = orthogonal_mp(D, F.T, n_nonzero_coefs=S, precompute=precompute)
-    return back(beta, norms, ok, B.shape[1]).T
+# --- float64 peers (the shared ones are in _harness) ----------------------------------------
 
 
 def sk_omp_error(B, F, eps):
     from sklearn.linear_model import orthogonal_mp
 
-    D, norms, ok = normalized(B)
+    D, norms, ok = h.normalized(B)
     beta = np.stack([orthogonal_mp(D, F[i], tol=float(eps[i]), precompute=True)
                      for i in range(F.shape[0])], axis=1)
-    return back(beta, norms, ok, B.shape[1]).T
-
-
-#: Facts about the peers' runs (e.g. how many Lasso fits did not converge), saved in the JSON.
-PEER_NOTES: dict[str, object] = {}
-
-
-def sk_lasso(B, F, lam):
-    from sklearn.exceptions import ConvergenceWarning
-    from sklearn.linear_model import Lasso
-
-    n = B.shape[0]
-    out = []
-    not_converged = 0
-    for f in F:
-        l_abs = lam * np.abs(B.T @ f).max()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", ConvergenceWarning)
-            out.append(Lasso(alpha=l_abs / n, fit_intercept=False).fit(B, f).coef_)
-        not_converged += any(issubclass(w.category, ConvergenceWarning) for w in caught)
-    PEER_NOTES["sklearn Lasso fits not converged (default tol=1e-4, max_iter=1000)"] = (
-        not_converged)
-    return np.stack(out)
+    return h.back(beta, norms, ok, B.shape[1]).T
 
 
 def lasso_objective(B, F, A, lam):
@@ -143,17 +62,13 @@ def lasso_objective(B, F, A, lam):
     return 0.5 * np.sum(R * R, axis=1) + l_abs * np.abs(A).sum(axis=1)
 
 
-def rel_residual(B, F, A):
-    return np.linalg.norm(F - A @ B.T, axis=1) / np.linalg.norm(F, axis=1)
-
-
 # ---------------------------------------------------------------------------------------------
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, required=True, help="JSON file to write")
-    ap.add_argument("--data", type=Path, default=DATA, help="shared data folder")
+    ap = h.parser(__doc__)
+    h.add_out(ap, type=Path, help="JSON file to write")
+    h.add_data(ap)
     ap.add_argument("--k", type=int, default=100)
     ap.add_argument("--fraction", type=float, default=0.05, help="n_BSF as a vertex fraction")
     ap.add_argument("--n-functions", type=int, default=100)
@@ -162,36 +77,38 @@ def main(argv=None):
     ap.add_argument("--eps-fraction", type=float, default=0.3,
                     help="omp_error: ε = (fraction·‖f‖)²")
     ap.add_argument("--max-atoms", type=int, default=256, help="omp_error atom cap")
-    ap.add_argument("--repeats", type=int, default=5)
+    h.add_repeats(ap, 5)
     ap.add_argument("--peer-repeats", type=int, default=1,
                     help="repeats of the (slow, deterministic) float64 peers")
     ap.add_argument("--methods", default="lstsq,omp,omp_error,lasso")
     ap.add_argument("--dtypes", default="float32,float64")
     args = ap.parse_args(argv)
+    mesh_path = args.data / "faust" / "tr_reg_000.off"
+    h.require_data(mesh_path)
     warnings.simplefilter("ignore", RuntimeWarning)  # sklearn's "ended prematurely"
 
-    mesh = bsfjax.load_mesh(args.data / "faust" / "tr_reg_000.off")
+    mesh = bsfjax.load_mesh(mesh_path)
     spec = bsfjax.spectrum(mesh, args.k)
     centers = bsfjax.farthest_point_sampling(mesh, args.fraction)
     frame = bsfjax.build_frame(spec, centers)
     B = np.asarray(frame.atoms, dtype=np.float64)
     n, q = B.shape
-    F = random_regions(mesh, spec.mass, args.n_functions)
+    F = h.random_regions(mesh, spec.mass, args.n_functions)
     S, lam = args.sparsity, args.lam
     eps = (args.eps_fraction * np.linalg.norm(F, axis=1)) ** 2
     print(f"FAUST tr_reg_000: n = {n}, k = {args.k}, q = {q} atoms "
           f"({len(np.unique(B, axis=1).T)} distinct), {F.shape[0]} functions "
           f"({F.sum(1).min():.0f}–{F.sum(1).max():.0f} vertices)")
 
-    methods = [m for m in args.methods.split(",") if m]
+    methods = h.name_list(args.methods)
     peers = {
         "lstsq": [("numpy.linalg.lstsq", lambda: np.linalg.lstsq(B, F.T, rcond=None)[0].T),
                   ("numpy.linalg.pinv", lambda: (np.linalg.pinv(B) @ F.T).T)],
-        "omp": [("sklearn orthogonal_mp", lambda: sk_omp(B, F, S, precompute=False)),
+        "omp": [("sklearn orthogonal_mp", lambda: h.sk_omp(B, F, S, precompute=False)),
                 ("sklearn orthogonal_mp(precompute=True)",
-                 lambda: sk_omp(B, F, S, precompute=True))],
+                 lambda: h.sk_omp(B, F, S, precompute=True))],
         "omp_error": [("sklearn orthogonal_mp(tol) loop", lambda: sk_omp_error(B, F, eps))],
-        "lasso": [("sklearn Lasso loop", lambda: sk_lasso(B, F, lam))],
+        "lasso": [("sklearn Lasso loop", lambda: h.sk_lasso(B, F, lam))],
     }
     options = {"lstsq": {}, "omp": {"sparsity": S}, "lasso": {"lam": lam},
                "omp_error": {"eps": eps, "max_atoms": args.max_atoms}}
@@ -200,14 +117,14 @@ def main(argv=None):
     for method in methods:
         peer_results = []
         for name, fn in peers[method]:
-            t, A = median_time(fn, args.peer_repeats)
+            t, A = h.median_time(fn, args.peer_repeats)
             peer_results.append((name, t, A))
             print(f"  peer {name:42s} {t:8.3f} s")
         ref_name, ref_t, ref_A = peer_results[0]
-        for dt in args.dtypes.split(","):
+        for dt in h.name_list(args.dtypes):
             with jax.enable_x64(dt == "float64"):
                 Fj = jax.numpy.asarray(F, dt)
-                t, (A, info) = median_time(
+                t, (A, info) = h.median_time(
                     lambda: bsfjax.encode(frame, Fj, method, return_info=True, weights=None,
                                           **options[method]), args.repeats)
                 A = np.asarray(A, np.float64)
@@ -216,8 +133,8 @@ def main(argv=None):
                 "method": method, "dtype": dt, "time_s": t,
                 "peers": {name: {"time_s": pt, "ratio": pt / t} for name, pt, _ in peer_results},
                 "ratio": ref_t / t, "ratio_peer": ref_name,
-                "rel_residual_median": float(np.median(rel_residual(B, F, A))),
-                "peer_rel_residual_median": float(np.median(rel_residual(B, F, ref_A))),
+                "rel_residual_median": float(np.median(h.rel_residual(B, F, A))),
+                "peer_rel_residual_median": float(np.median(h.rel_residual(B, F, ref_A))),
                 "n_atoms_median": float(np.median(info.n_atoms)),
                 "converged": int(info.converged.sum()),
             }
@@ -260,16 +177,16 @@ def main(argv=None):
             "rel_residual_median": float(np.median(np.asarray(inf.residual)
                                                    / np.linalg.norm(F, axis=1)))}
     print("omp_error with encode's default eps, max_atoms=64:", default_eps)
+    machine = h.machine_facts()
     result = {
         "benchmark": "coding", "mesh": "faust/tr_reg_000.off", "n": n, "k": args.k, "q": q,
         "n_functions": int(F.shape[0]), "sparsity": S, "lam": lam,
         "omp_error_eps": f"({args.eps_fraction}*||f||)^2, max_atoms={args.max_atoms}",
         "omp_error_default": default_eps,
-        "jax": jax.__version__, "platform": platform.platform(),
-        "cpu_count": os.cpu_count(), "peer_notes": PEER_NOTES, "rows": rows,
+        "jax": machine["jax"], "platform": machine["platform"],
+        "cpu_count": machine["cores"], "peer_notes": h.PEER_NOTES, "rows": rows,
     }
-    with atomic_path(args.out) as tmp:
-        Path(tmp).write_text(json.dumps(result, indent=2))
+    h.write_json(args.out, result)
     print(f"wrote {args.out}")
 
 

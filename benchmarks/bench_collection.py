@@ -27,7 +27,6 @@ the map from one start, through the batched stages, instead of ``estimate_map``'
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -38,16 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-SEG = DATA / "segmentations" / "smpl_vert_segmentation.json"
+import _harness as h
 
-
-def smpl_labels() -> np.ndarray:
-    seg = json.loads(SEG.read_text())
-    lab = np.zeros(6890, np.int64)
-    for i, (_, verts) in enumerate(sorted(seg.items())):
-        lab[verts] = i
-    return lab
+DATA = h.DATA
 
 
 def make_six(folder: Path, labels: np.ndarray):
@@ -252,20 +244,19 @@ print(json.dumps(out))
 
 
 def main() -> None:
-    from bsfjax.internal import write_text_atomic
-
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", required=True)
+    ap = h.parser(__doc__)
+    h.add_out(ap)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--batch", type=int, default=1, help="targets per device under vmap")
     ap.add_argument("--one-start", action="store_true",
                     help="without landmarks, one start per map (the batched stages)")
     args = ap.parse_args()
+    h.require_data(DATA / h.SMPL_SEGMENTATION, DATA / "faust", option=None)
     if args.one_start:
         FLAGS.append("--one-start")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    labels = smpl_labels()
+    labels = h.smpl_labels(DATA)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -282,7 +273,7 @@ def main() -> None:
             r = measure(name, src, lab, targets, folder, truth, batch=args.batch)
             rows.append(r)
             print(json.dumps(r), flush=True)
-    write_text_atomic(out / "collection.json", json.dumps(rows, indent=1) + "\n")
+    h.write_json(out / "collection.json", rows, indent=1)
     lines = ["| set | targets | vertices | one call | separate calls | speed-up | s/target "
              "compiled | s/5K target | compilations | accuracy one / separate | warm "
              "compilation cache: one / separate |",
@@ -298,7 +289,7 @@ def main() -> None:
                      f"{r['compilations_first_pass']} (then {r['compilations_second_pass']}) | "
                      f"{acc} | {r['wall_one_call_warm_cache_s']:.1f} s / "
                      f"{r['wall_separate_calls_warm_cache_s']:.1f} s |")
-    write_text_atomic(out / "collection.md", "\n".join(lines) + "\n")
+    h.write_text(out / "collection.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

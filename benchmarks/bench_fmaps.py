@@ -45,50 +45,25 @@ faster); error ratios are bsfjax / pyFM (≤ 1: bsfjax at least as accurate).
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
-import platform
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+import _harness as h
+
+DATA = h.DATA
 LANDMARK = 2446
 K_FIT, K_ZO, STEP, K_DESCR, N_DESCR = 30, 100, 5, 128, 100
 
 
 def timed(fn, repeats):
-    """(first-call seconds, median seconds of ``repeats`` further calls, last result)."""
-    t = time.perf_counter()
-    out = fn()
-    first = time.perf_counter() - t
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        ts.append(time.perf_counter() - t)
-    return first, float(np.median(ts)), out
-
-
-def block(x):
-    import jax
-
-    return jax.block_until_ready(x)
-
-
-def pyfm_mesh(mesh, spec, W):
-    import scipy.sparse as sp
-    from pyFM.mesh import TriMesh
-
-    tm = TriMesh(np.array(mesh.vertices), np.array(mesh.faces))
-    tm.stiffness = W
-    tm.mass = sp.diags(spec.mass).tocsc()
-    tm.eigenvalues = spec.evals.copy()
-    tm.eigenvectors = spec.evecs.copy()
-    return tm
+    """(first-call seconds, median seconds of ``repeats`` further calls, last result); every
+    call until ``jax.block_until_ready`` of its result."""
+    t = h.timed(fn, repeats)
+    return t.first, t.median, t.out
 
 
 def run_pair(src_id, tgt_id, repeats, cache, orient):
@@ -107,12 +82,12 @@ def run_pair(src_id, tgt_id, repeats, cache, orient):
 
     # ---- descriptors
     def ours_descr():
-        return [block(np.concatenate([np.asarray(bsfjax.wks(s, N_DESCR, k=K_DESCR)),
-                                      np.asarray(bsfjax.wks(s, N_DESCR, k=K_DESCR, landmarks=lm))],
-                                     axis=1)) for s in spectra]
+        return [np.concatenate([np.asarray(bsfjax.wks(s, N_DESCR, k=K_DESCR)),
+                                np.asarray(bsfjax.wks(s, N_DESCR, k=K_DESCR, landmarks=lm))],
+                               axis=1) for s in spectra]
 
     row["descr_compile_s"], row["descr_bsfjax_s"], (dm, dn) = timed(ours_descr, repeats)
-    model = FunctionalMapping(*[pyfm_mesh(m, s, bsfjax.laplacian(m)[0])
+    model = FunctionalMapping(*[h.pyfm_mesh(m, s, bsfjax.laplacian(m)[0])
                                 for m, s in zip(meshes, spectra)])
     model.preprocess(n_descr=N_DESCR, descr_type=None, k_process=200)  # spectra only
 
@@ -126,7 +101,7 @@ def run_pair(src_id, tgt_id, repeats, cache, orient):
 
     # ---- estimation 30×30
     row["fit_compile_s"], row["fit_bsfjax_s"], C = timed(
-        lambda: block(bsfjax.estimate_fmap(sm, sn, dm, dn, k=K_FIT)), repeats)
+        lambda: bsfjax.estimate_fmap(sm, sn, dm, dn, k=K_FIT), repeats)
     C = np.asarray(C)
     _, row["fit_pyfm_s"], _ = timed(lambda: model.fit(K=K_FIT), repeats)
     C_py = model.FM_12
@@ -140,7 +115,7 @@ def run_pair(src_id, tgt_id, repeats, cache, orient):
     for kk, CC, a, b in ((K_FIT, C, sm30, sn30), (K_ZO, C_gt, sm.truncate(K_ZO),
                                                     sn.truncate(K_ZO))):
         row[f"p2p{kk}_compile_s"], row[f"p2p{kk}_bsfjax_s"], p_ours = timed(
-            lambda: block(bsfjax.fmap_to_p2p(CC, a, b)), repeats)
+            lambda: bsfjax.fmap_to_p2p(CC, a, b), repeats)
         _, row[f"p2p{kk}_pyfm_s"], p_py = timed(
             lambda: FM_to_p2p(CC, a.evecs, b.evecs), repeats)
         emb_m, emb_n = a.evecs @ CC.T, b.evecs
@@ -153,7 +128,7 @@ def run_pair(src_id, tgt_id, repeats, cache, orient):
 
     # ---- ZoomOut 30 → 100
     row["zo_compile_s"], row["zo_bsfjax_s"], C_zo = timed(
-        lambda: block(bsfjax.zoomout(C, sm, sn, K_ZO, step=STEP)), repeats)
+        lambda: bsfjax.zoomout(C, sm, sn, K_ZO, step=STEP), repeats)
     nit = (K_ZO - K_FIT) // STEP
     _, row["zo_pyfm_s"], C_zo_py = timed(lambda: model.zoomout_refine(C_py, nit=nit, step=STEP),
                                          max(1, repeats // 2))
@@ -166,9 +141,9 @@ def run_pair(src_id, tgt_id, repeats, cache, orient):
     # ---- optional: the same pipeline with the orientation-preserving term
     if orient > 0:
         w = bsfjax.FmapWeights(orient=orient)
-        row["fitor_compile_s"], row["fitor_bsfjax_s"], Co = timed(lambda: block(
-            bsfjax.estimate_fmap(sm, sn, dm, dn, k=K_FIT, weights=w, source_mesh=meshes[0],
-                                 target_mesh=meshes[1])), repeats)
+        row["fitor_compile_s"], row["fitor_bsfjax_s"], Co = timed(lambda: bsfjax.estimate_fmap(
+            sm, sn, dm, dn, k=K_FIT, weights=w, source_mesh=meshes[0], target_mesh=meshes[1]),
+            repeats)
         _, row["fitor_pyfm_s"], _ = timed(lambda: model.fit(K=K_FIT, w_orient=orient),
                                           max(1, repeats // 2))
         Co, Co_py = np.asarray(Co), model.FM_12
@@ -228,24 +203,23 @@ def markdown(rows, machine, repeats, dtype, versions):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="bench-results")
-    ap.add_argument("--repeats", type=int, default=3)
+    ap = h.parser(__doc__)
+    h.add_out(ap, default="bench-results")
+    h.add_repeats(ap, 3)
     ap.add_argument("--pairs", nargs="+", default=["000-001", "000-010"],
                     help="FAUST pairs SRC-TGT (registration ids)")
     ap.add_argument("--x64", action="store_true", help="run bsfjax in float64")
     ap.add_argument("--orient", type=float, default=0.0,
                     help="also run both pipelines with this orientation weight (pyFM w_orient)")
-    ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "bsfjax-bench-spectra"),
-                    help="spectrum cache folder (spectra are not timed)")
+    h.add_cache(ap, Path(tempfile.gettempdir()) / "bsfjax-bench-spectra")
     args = ap.parse_args(argv)
+    h.require_data(*(DATA / "faust" / f"tr_reg_{i}.off" for p in args.pairs
+                     for i in p.split("-")), option=None)
     import jax
 
     if args.x64:
         jax.config.update("jax_enable_x64", True)
     from importlib.metadata import version
-
-    from bsfjax.internal import write_text_atomic
 
     versions = {p: version(p) for p in ("pyfmaps", "jax", "optimistix", "numpy", "scipy")}
     rows = []
@@ -253,14 +227,13 @@ def main(argv=None):
         src, tgt = pair.split("-")
         rows.append(run_pair(src, tgt, args.repeats, args.cache, args.orient))
         print(json.dumps(rows[-1], indent=1), flush=True)
-    machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-               f"{platform.system()}, {jax.devices()[0].platform}")
+    machine = h.short_machine(device=True)
     dtype = "float64" if args.x64 else "float32"
     md = markdown(rows, machine, args.repeats, dtype, versions)
     out = Path(args.out)
-    write_text_atomic(out / "fmaps.json", json.dumps(
-        {"machine": machine, "dtype": dtype, "versions": versions, "rows": rows}, indent=2))
-    write_text_atomic(out / "fmaps.md", md)
+    h.write_json(out / "fmaps.json",
+                 {"machine": machine, "dtype": dtype, "versions": versions, "rows": rows})
+    h.write_text(out / "fmaps.md", md)
     print(md)
 
 

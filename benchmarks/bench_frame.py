@@ -17,67 +17,26 @@ Every timing is the median of ``--repeats`` runs after one warm-up call (which c
 
 from __future__ import annotations
 
-import argparse
-import json
-import os
-import platform
 import time
 from pathlib import Path
 
 import jax
 import numpy as np
 
+import _harness as h
 import bsfjax
-from bsfjax.internal import atomic_path
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-TAUS = (1e-3, 5e-3, 1e-2)
-GAMMA = 0.75
-
-
-def median_time(fn, repeats: int) -> tuple[float, object]:
-    out = fn()  # warm-up: compiles the jitted paths
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times)), out
-
-
-def numpy_build(spec, centers, taus=TAUS, gamma=GAMMA):
-    """Algorithm 1 in float64 numpy, vectorized over centres (same steps as build_frame)."""
-    area = spec.mass.sum()
-    ghat = np.exp(-np.asarray(taus)[:, None] * area * (spec.evals - spec.evals[0]))  # (S, k)
-    coeffs = (ghat[:, None, :] * spec.evecs[centers][None]).reshape(-1, spec.k).T  # (k, q)
-    g = np.abs(spec.evecs @ coeffs)
-    return g / g.max(axis=0) >= gamma, coeffs
-
-
-def numpy_transfer(coeffs, C, evecs, gamma=GAMMA):
-    g = np.abs(evecs[:, :C.shape[0]] @ (C @ coeffs[:C.shape[1]]))
-    m = g.max(axis=0)
-    return (g / np.where(m > 0, m, 1) >= gamma) & (m > 0)
-
-
-def numpy_fps(points, first, n):
-    idx = np.empty(n, dtype=np.int64)
-    idx[0] = first
-    mind = np.sum((points - points[first]) ** 2, axis=1)
-    for i in range(1, n):
-        idx[i] = np.argmax(mind)
-        np.minimum(mind, np.sum((points - points[idx[i]]) ** 2, axis=1), out=mind)
-    return idx
+from _harness import GAMMA, TAUS, median_time
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, required=True, help="JSON file to write")
-    ap.add_argument("--data", type=Path, default=DATA, help="shared data folder")
+    ap = h.parser(__doc__)
+    h.add_out(ap, type=Path, help="JSON file to write")
+    h.add_data(ap)
     ap.add_argument("--k", type=int, default=100)
     ap.add_argument("--fraction", type=float, default=0.05, help="n_BSF as a vertex fraction")
-    ap.add_argument("--repeats", type=int, default=9)
+    h.add_repeats(ap, 9)
     args = ap.parse_args(argv)
+    h.require_data(*(args.data / "faust" / f"tr_reg_00{i}.off" for i in (0, 1)))
 
     src = bsfjax.load_mesh(args.data / "faust" / "tr_reg_000.off")
     tgt = bsfjax.load_mesh(args.data / "faust" / "tr_reg_001.off")
@@ -85,25 +44,24 @@ def main(argv=None):
     spec, spec_t = bsfjax.spectrum(src, args.k), bsfjax.spectrum(tgt, args.k)
     t_spec = time.perf_counter() - t0
 
-    # FPS (euclidean)
-    n = bsfjax._sampling._fps.n_samples(args.fraction, src.n_vertices)
+    # FPS (euclidean); n: the number of samples the fraction asks for
     first = int(np.random.default_rng(0).integers(src.n_vertices))
     t_fps_jax, centers = median_time(
         lambda: bsfjax.farthest_point_sampling(src, args.fraction, seed=0), args.repeats)
-    t_fps_np, centers_np = median_time(lambda: numpy_fps(src.vertices, first, n), args.repeats)
+    n = len(centers)
+    t_fps_np, centers_np = median_time(lambda: h.numpy_fps(src.vertices, first, n), args.repeats)
 
     # build
     t_build_jax, frame = median_time(
-        lambda: jax.block_until_ready(bsfjax.build_frame(spec, centers, TAUS, GAMMA)),
-        args.repeats)
-    t_build_np, (atoms_np, coeffs_np) = median_time(lambda: numpy_build(spec, centers),
+        lambda: bsfjax.build_frame(spec, centers, TAUS, GAMMA), args.repeats)
+    t_build_np, (atoms_np, coeffs_np) = median_time(lambda: h.numpy_build(spec, centers),
                                                     args.repeats)
 
     # transfer with the identity point map written as a functional map
     C = spec_t.evecs.T @ (spec_t.mass[:, None] * spec.evecs)
     t_tr_jax, moved = median_time(
-        lambda: jax.block_until_ready(bsfjax.transfer_frame(frame, C, spec_t)), args.repeats)
-    t_tr_np, moved_np = median_time(lambda: numpy_transfer(coeffs_np, C, spec_t.evecs),
+        lambda: bsfjax.transfer_frame(frame, C, spec_t), args.repeats)
+    t_tr_np, moved_np = median_time(lambda: h.numpy_transfer(coeffs_np, C, spec_t.evecs),
                                     args.repeats)
 
     atoms = np.asarray(frame.atoms) > 0.5
@@ -116,15 +74,16 @@ def main(argv=None):
          f"atom entries differing: {int(((np.asarray(moved.atoms) > 0.5) != moved_np).sum())} "
          f"of {moved_np.size}"),
     ]
+    machine = h.machine_facts()
     result = {
         "mesh": "faust/tr_reg_000.off (transfer target tr_reg_001.off)",
         "n_vertices": src.n_vertices, "k": args.k, "n_centers": int(n),
         "n_atoms": int(frame.n_atoms), "taus": TAUS, "gamma": GAMMA,
         "repeats": args.repeats, "statistic": "median seconds after one warm-up call",
         "spectrum_seconds_both_shapes": t_spec,
-        "jax_version": jax.__version__, "backend": jax.default_backend(),
-        "device": str(jax.devices()[0]), "jax_dtype": str(frame.atoms.dtype),
-        "numpy_dtype": "float64", "cpu_count": os.cpu_count(), "machine": platform.machine(),
+        "jax_version": machine["jax"], "backend": machine["backend"],
+        "device": machine["device"], "jax_dtype": str(frame.atoms.dtype),
+        "numpy_dtype": "float64", "cpu_count": machine["cores"], "machine": machine["arch"],
         "results": [{"op": op, "bsfjax_s": tj, "numpy_s": tn, "numpy_over_bsfjax": tn / tj,
                      "check": chk} for op, tj, tn, chk in rows],
     }
@@ -134,8 +93,7 @@ def main(argv=None):
     print(f"{'op':36s} {'bsfjax ms':>10s} {'numpy f64 ms':>13s} {'ratio':>7s}  check")
     for op, tj, tn, chk in rows:
         print(f"{op:36s} {1e3 * tj:10.2f} {1e3 * tn:13.2f} {tn / tj:7.2f}  {chk}")
-    with atomic_path(args.out) as tmp:
-        tmp.write_text(json.dumps(result, indent=2) + "\n")
+    h.write_json(args.out, result)
     print(f"wrote {args.out}")
 
 

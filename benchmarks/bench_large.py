@@ -39,93 +39,33 @@ as a first call by a user would.  Memory: peak resident set size of the process
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
-import platform
 import resource
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import jax
 import numpy as np
 
+import _harness as h
 import bsfjax
-from bsfjax.internal import write_text_atomic
-from bsfjax.internal import subdivide
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_coding import random_regions  # noqa: E402
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-GIB = 2**30
-
-
-def cat_pair(data: Path, levels: int, decimate: int | None = None):
-    """cat0 and cat6 (on cat0's faces) Loop-subdivided ``levels`` times, then (``decimate``)
-    both decimated to about that many vertices by the same edge collapses; identity map."""
-    m0 = bsfjax.load_mesh(data / "tosca" / "cat" / "cat0.off")
-    m6 = bsfjax.load_mesh(data / "tosca" / "cat" / "cat6.off")
-    m6 = bsfjax.Mesh(m6.vertices, m0.faces, name="cat6 on cat0 faces")
-    s0, s6 = subdivide(m0, "loop", levels), subdivide(m6, "loop", levels)
-    if not decimate:
-        return s0, s6
-    import fast_simplification as fs
-
-    faces = np.asarray(s0.faces, np.int32)
-    target = 2 * int(decimate) + (faces.shape[0] - 2 * s0.n_vertices)  # Euler: F − 2V fixed
-    _, _, collapses = fs.simplify(np.asarray(s0.vertices, np.float32), faces,
-                                  target_count=target, return_collapses=True)
-    out = []
-    for m in (s0, s6):
-        v, f, _ = fs.replay_simplification(np.asarray(m.vertices, np.float32), faces, collapses)
-        out.append(bsfjax.Mesh(np.asarray(v, np.float64), np.asarray(f, np.int64),
-                               name=f"{m.name} decimated"))
-    return tuple(out)
+from _harness import GIB, PeakRSS
 
 
 def cached_spectra(data: Path, levels: int, k: int, cache: Path, method: str = "auto",
                    decimate: int | None = None):
     """Spectra of the pair, computed (if not cached) in a child process."""
-    code = ("import sys; sys.path.insert(0, {bench!r}); from bench_large import cat_pair, "
-            "Path; import bsfjax; "
+    code = ("import sys; sys.path.insert(0, {bench!r}); from pathlib import Path; "
+            "from _harness import cat_pair; import bsfjax; "
             "[bsfjax.spectrum(m, {k}, cache_dir={cache!r}, method={method!r}) for m in "
             "cat_pair(Path({data!r}), {levels}, {decimate!r})]").format(
-                bench=str(Path(__file__).resolve().parent), k=k, cache=str(cache),
+                bench=str(h.BENCHMARKS), k=k, cache=str(cache),
                 data=str(data), levels=levels, method=method, decimate=decimate)
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-c", code], check=True)
     return time.perf_counter() - t0
-
-
-class PeakRSS:
-    """Peak resident set size of this process over a ``with`` block (sampled every 20 ms)."""
-
-    def __init__(self):
-        import psutil
-
-        self._proc = psutil.Process()
-        self.peak = 0
-
-    def _run(self):
-        while not self._stop.is_set():
-            self.peak = max(self.peak, self._proc.memory_info().rss)
-            self._stop.wait(0.02)
-
-    def __enter__(self):
-        self._stop = threading.Event()
-        self.peak = self._proc.memory_info().rss
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join()
-        self.peak = max(self.peak, self._proc.memory_info().rss)
 
 
 def stage(name, fn, rows):
@@ -138,26 +78,12 @@ def stage(name, fn, rows):
     return out
 
 
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / GIB
-    return (f"{cpu}, {os.cpu_count()} cores, {mem:.0f} GiB RAM, {platform.system()}; "
-            f"jax {jax.__version__} {jax.default_backend()} ({jax.device_count()} device(s))")
-
-
 def run(data: Path, levels: int, k: int, n_functions: int, cache: Path, sparsity: int = 10,
         method: str = "auto", fraction: float = 0.05, decimate: int | None = None):
     t_spec = cached_spectra(data, levels, k, cache, method, decimate)
     rows = []
     src_mesh, tgt_mesh = stage("load + Loop subdivision (both)",
-                               lambda: cat_pair(data, levels, decimate), rows)
+                               lambda: h.cat_pair(data, levels, decimate), rows)
     src = stage("load cached spectrum (source)",
                 lambda: bsfjax.spectrum(src_mesh, k, cache_dir=cache, method=method), rows)
     tgt = stage("load cached spectrum (target)",
@@ -167,7 +93,7 @@ def run(data: Path, levels: int, k: int, n_functions: int, cache: Path, sparsity
                     lambda: bsfjax.farthest_point_sampling(src_mesh, fraction), rows)
     frame = stage("build_frame (sparse)", lambda: bsfjax.build_frame(src, centers, sparse=True),
                   rows)
-    F = random_regions(src_mesh, np.asarray(src.mass), n_functions, seed=0).astype(np.float32)
+    F = h.random_regions(src_mesh, np.asarray(src.mass), n_functions, seed=0).astype(np.float32)
     alpha = stage(f"encode {n_functions} functions omp S={sparsity}",
                   lambda: bsfjax.encode(frame, F, "omp", sparsity=sparsity, weights=None), rows)
     approx = stage("decode on source (approximation)", lambda: bsfjax.decode(frame, alpha), rows)
@@ -201,7 +127,7 @@ def run(data: Path, levels: int, k: int, n_functions: int, cache: Path, sparsity
         "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / GIB,
         "relative_error_approximation_median": float(np.median(err_a)),
         "relative_error_transfer_median": float(np.median(err_t)),
-        "stages": rows, "machine": machine(),
+        "stages": rows, "machine": h.describe_machine(),
         "note": "single runs, compile time included; spectra computed once in a child process",
     }
     print(json.dumps({k_: v for k_, v in result.items() if k_ != "stages"}, indent=1))
@@ -209,13 +135,13 @@ def run(data: Path, levels: int, k: int, n_functions: int, cache: Path, sparsity
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, required=True, help="JSON file to write")
-    ap.add_argument("--data", type=Path, default=DATA)
+    ap = h.parser(__doc__)
+    h.add_out(ap, type=Path, help="JSON file to write")
+    h.add_data(ap)
     ap.add_argument("--levels", type=int, default=1, help="Loop subdivisions of the cat")
     ap.add_argument("--k", type=int, default=100)
     ap.add_argument("--functions", type=int, default=100)
-    ap.add_argument("--cache", type=Path, default=Path("/tmp/bsfjax-spectra"))
+    h.add_cache(ap, h.TMP_CACHE, type=Path, help="spectrum cache folder")
     ap.add_argument("--method", default="auto", help="bsfjax.spectrum's method ('fast': the "
                     "approximate eigensolver, to see its effect on the transfer error)")
     ap.add_argument("--fraction", type=float, default=0.05,
@@ -223,9 +149,10 @@ def main(argv=None):
     ap.add_argument("--decimate", type=int, default=None, help="decimate both refined meshes "
                     "to about this many vertices (same collapses; needs fast_simplification)")
     args = ap.parse_args(argv)
+    h.require_data(*(args.data / "tosca" / "cat" / f"cat{i}.off" for i in (0, 6)))
     result = run(args.data, args.levels, args.k, args.functions, args.cache,
                  method=args.method, fraction=args.fraction, decimate=args.decimate)
-    write_text_atomic(args.out, json.dumps(result, indent=2) + "\n")
+    h.write_json(args.out, result)
     print(f"wrote {args.out}")
 
 

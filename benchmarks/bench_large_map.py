@@ -9,10 +9,11 @@ choice among them, the derived landmarks and the turn check, as ``bsfjax transfe
 Two ways in the same run, each in a child process of its own (so each peak resident set
 size is its own):
 
-* ``selection``: the default.  On a target of more than ``SELECTION_VERTICES`` vertices the
-  candidates' point maps are searched only at the corners of ``SELECTION_FACES`` random
-  faces and at the distortions' samples; the kept map then over every vertex.
-* ``every vertex`` (the peer): the same call with ``SELECTION_VERTICES`` raised above the
+* ``selection``: the default.  On a target of more than ``selection_vertices`` vertices
+  (a field of ``bsfjax.MapEstimator``) the candidates' point maps are searched only at the
+  corners of ``selection_faces`` random faces and at the distortions' samples; the kept map
+  then over every vertex.
+* ``every vertex`` (the peer): the same call with ``selection_vertices`` raised above the
   target's size, so every candidate is searched over every vertex.
 
 Per way: seconds of the call (one call: it takes tens of seconds to minutes; JAX's compile
@@ -26,18 +27,12 @@ target (``bsfjax.geodesic_error``, units of √area).
 
 from __future__ import annotations
 
-import argparse
-import json
 import multiprocessing as mp
-import os
-import platform
 import resource
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_large import DATA  # noqa: E402
+import _harness as h
 
 WAYS = ("selection", "every vertex")
 
@@ -47,16 +42,15 @@ def one(data: str, levels: int, way: str, cache: str, queue) -> None:
     import numpy as np
 
     import bsfjax
-    import bsfjax._maps._estimator as me
-    from bench_large import cat_pair
 
-    source, target = cat_pair(Path(data), levels)
+    source, target = h.cat_pair(Path(data), levels)
     sm, sn = (bsfjax.spectrum(m, 60, cache_dir=cache) for m in (source, target))
-    if way == "every vertex":
-        me.SELECTION_VERTICES = target.n_vertices + 1
+    # estimate_map(k=30, refine_to=60), every other field at its default; the peer searches
+    # every candidate over every vertex (selection_vertices above the target's size)
+    every = dict(selection_vertices=target.n_vertices + 1) if way == "every vertex" else {}
+    estimator = bsfjax.MapEstimator(k=30, refine_to=60, **every)
     t0 = time.perf_counter()
-    est = bsfjax.estimate_map(sm, sn, k=30, refine_to=60, source_mesh=source,
-                              target_mesh=target)
+    est = estimator(sm, sn, source_mesh=source, target_mesh=target)
     seconds = time.perf_counter() - t0
     samples = np.asarray(bsfjax.farthest_point_sampling(target, 500))
     error = bsfjax.geodesic_error(source, est.p2p[samples], samples)
@@ -96,26 +90,25 @@ def markdown(rows: list[dict]) -> str:
         lines.append(f"\n{a['vertices']} vertices: the selection is "
                      f"{b['seconds'] / a['seconds']:.2f}× as fast as every vertex, "
                      f"peak {a['peak_rss_gb']} against {b['peak_rss_gb']} GB.")
-    lines.append(f"\n{os.cpu_count()} CPUs, {platform.machine()}.")
+    lines.append(f"\n{h.cpus_note()}.")
     return "\n".join(lines) + "\n"
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, required=True, help="folder for the JSON and Markdown")
-    ap.add_argument("--data", type=Path, default=DATA)
+    ap = h.parser(__doc__)
+    h.add_out(ap, type=Path, help="folder for the JSON and Markdown")
+    h.add_data(ap)
     ap.add_argument("--levels", type=int, nargs="+", default=[0, 1])
-    ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "bsfjax-spectra")
+    h.add_cache(ap, h.HOME_CACHE, type=Path, help="spectrum cache folder")
     ap.add_argument("--ways", nargs="+", choices=WAYS, default=list(WAYS),
                     help="the default only (selection) where the peer would take hours: "
                          "level 2, 445.8K vertices")
     args = ap.parse_args(argv)
-    from bsfjax.internal import write_text_atomic
-
+    h.require_data(*(args.data / "tosca" / "cat" / f"cat{i}.off" for i in (0, 6)))
     rows = run(args.data, args.levels, args.cache, args.ways)
     args.out.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(args.out / "large_map.json", json.dumps(rows, indent=2) + "\n")
-    write_text_atomic(args.out / "large_map.md", markdown(rows))
+    h.write_json(args.out / "large_map.json", rows)
+    h.write_text(args.out / "large_map.md", markdown(rows))
     print(markdown(rows))
 
 

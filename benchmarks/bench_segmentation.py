@@ -74,28 +74,24 @@ method) and ``segmentation_allpairs.md``.
 
 from __future__ import annotations
 
-import argparse
 import itertools
-import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+import _harness as h
 import bsfjax as bj
-from bsfjax.internal import write_text_atomic
-from bsfjax.internal import LANDMARK_FREE_STARTS, ORIENT_WEIGHT
-from bsfjax.experiments._datasets import load_dataset
-from bsfjax.experiments._io import write_csv
+from _harness import write_csv, write_text
+from bsfjax.internal import orientation_bases
+from bsfjax.experiments import load_dataset
 from bsfjax.experiments.segmentation import (K_SPECTRA, METHODS, report,
                                              segmentation_experiment, segmentation_pair,
                                              shape_labels, template_vertices)
 
-PAIRS = {"faust": [("000", "001"), ("010", "012"), ("020", "022"), ("000", "010"),
-                   ("001", "021"), ("012", "022")],
-         "faust_5k": [("000", "001"), ("000", "010"), ("001", "011")]}
+#: Issue 14's nine pairs (six FAUST, three FAUST_5k).
+PAIRS = h.SEGMENTATION_PAIRS
 #: Pairs no default was chosen on (``--held-out``).
 HELD_OUT = {"faust": [("000", "012"), ("001", "010"), ("002", "020"), ("011", "021"),
                       ("021", "002"), ("022", "011"), ("002", "012"), ("010", "001")],
@@ -135,14 +131,13 @@ def changed_targets(data: Path, seg: Path, out: Path, cache, variants, change, k
         md += [f"# Targets, {key} {variant} ({span} vertices)", "",
                report(part, (30,)).markdown, ""]
     write_csv(rows, out / f"{stem}.csv")
-    write_text_atomic(out / f"{stem}.md", "\n".join(md))
+    write_text(out / f"{stem}.md", "\n".join(md))
     print("\n".join(md))
     return 0
 
 
 def triangles_report(data: Path, seg: Path, out: Path, cache, repeats: int) -> int:
     """``--triangles`` (module doc)."""
-    from bsfjax.internal import ZOOMOUT_SAMPLES
     from bsfjax.experiments.segmentation import N_LANDMARKS, _maps, gt_inverse
 
     template, _ = bj.load_labels(seg)
@@ -161,7 +156,8 @@ def triangles_report(data: Path, seg: Path, out: Path, cache, repeats: int) -> i
             lm = np.asarray(bj.farthest_point_sampling(src, N_LANDMARKS))
             maps = _maps(sm, sn, gt, 30, (lm, gt_inverse(gt, lm, tgt, src)), (src, tgt),
                          ("default", "truth"))
-            samples = (bj.subsample(src, ZOOMOUT_SAMPLES), bj.subsample(tgt, ZOOMOUT_SAMPLES))
+            n_samples = bj.MapEstimator().zoomout_samples
+            samples = (bj.subsample(src, n_samples), bj.subsample(tgt, n_samples))
             area, mass = tgt.face_areas(), np.asarray(sn.mass)
             for map_name, (C, p2p) in maps.items():
                 kw = dict(C=C, p2p=p2p, samples=samples)
@@ -182,18 +178,11 @@ def triangles_report(data: Path, seg: Path, out: Path, cache, repeats: int) -> i
                 calls = {"vertices": lambda: bj.transfer_labels(sm, sn, lab_m, **kw),
                          "triangles": lambda: bj.transfer_face_labels(
                              sm, sn, tri_m, source_mesh=src, target_mesh=tgt, **kw)}
-                med = {}
-                for what, call in calls.items():
-                    times = []
-                    for _ in range(repeats + 1):
-                        t0 = time.perf_counter()
-                        call()
-                        times.append(time.perf_counter() - t0)
-                    med[what] = float(np.median(times[1:]))
+                med = {what: h.timed(call, repeats).median for what, call in calls.items()}
                 timing = (f"'refined' after the default map, FAUST 000→010 (6890 vertices, "
                           f"13776 triangles, 24 parts), median of {repeats} warm calls: "
                           f"triangles {med['triangles']:.3f} s, vertices {med['vertices']:.3f} "
-                          f"s in the same run; {os.cpu_count()} CPUs.")
+                          f"s in the same run; {h.cpus_note(arch=False)}.")
     write_csv(rows, out / "segmentation_triangles.csv")
     keys = list(rows[0])
     lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
@@ -205,7 +194,7 @@ def triangles_report(data: Path, seg: Path, out: Path, cache, repeats: int) -> i
                          f"{np.mean([r['vertices %'] for r in sel]):.2f} | "
                          f"{np.mean([r['triangles %'] for r in sel]):.2f} |")
     md = "\n".join(lines) + "\n\n" + timing + "\n"
-    write_text_atomic(out / "segmentation_triangles.md", md)
+    write_text(out / "segmentation_triangles.md", md)
     print(md)
     return 0
 
@@ -250,12 +239,8 @@ def no_landmarks_report(rows, data: Path, out: Path, args, tail: str = "") -> in
     peers = {"several starts (default)": {}, "one start": dict(starts=((30, 7.0),))}
     med = {}
     for name, extra in peers.items():
-        times = []
-        for _ in range(args.repeats + 1):
-            t0 = time.perf_counter()
-            est = bj.estimate_map(sm, sn, **kw, **extra)
-            times.append(time.perf_counter() - t0)
-        med[name] = float(np.median(times[1:]))
+        t = h.timed(lambda: bj.estimate_map(sm, sn, **kw, **extra), args.repeats)
+        med[name], est = t.median, t.out
         if est.start is not None:
             chosen = (f"kept start {est.start}, derived landmarks "
                       f"{'kept' if est.landmarks is not None else 'not kept'}, distortion "
@@ -263,7 +248,6 @@ def no_landmarks_report(rows, data: Path, out: Path, args, tail: str = "") -> in
     scans = orientation_sharing(sm, sn, src.mesh, tgt.mesh, args.repeats)
     rep = report(rows, (30,))
     write_csv(rows, out / f"segmentation_nolandmarks{tail}.csv")
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     timing = (f"estimate_map without landmarks on FAUST 000→010 (k = 30, ZoomOut to 60), median "
               f"of {args.repeats} warm calls: " + ", ".join(f"{n} {m:.2f} s" for n, m in
                                                            med.items()) +
@@ -271,10 +255,8 @@ def no_landmarks_report(rows, data: Path, out: Path, args, tail: str = "") -> in
               f"{chosen}. Its 15 starts' estimates (WKS given): {scans[0]:.2f} s with the meshes "
               f"(a face scan per estimate, until stop 35), {scans[1]:.2f} s with the pair's "
               f"orientation_bases (one scan per shape, included; {scans[0] / scans[1]:.2f}× "
-              f"faster; the same maps); {os.cpu_count()} CPUs, load average {load:.1f}, "
-              f"{platform.machine()}.")
-    write_text_atomic(out / f"segmentation_nolandmarks{tail}.md",
-                      rep.markdown + "\n\n" + timing + "\n")
+              f"faster; the same maps); {h.cpus_note(load=True)}.")
+    write_text(out / f"segmentation_nolandmarks{tail}.md", rep.markdown + "\n\n" + timing + "\n")
     print(rep.markdown)
     print(timing)
     return 0
@@ -285,26 +267,23 @@ def orientation_sharing(sm, sn, source_mesh, target_mesh, repeats: int) -> tuple
     (``estimate_fmap`` with the orientation term, WKS computed beforehand): with the meshes,
     and with the pair's ``orientation_bases`` (computed in the timed run).  Raises if the two
     give different maps."""
-    starts = LANDMARK_FREE_STARTS
+    defaults = bj.MapEstimator()
+    starts = defaults.landmark_free_starts
     d = {s: [bj.wks(x, 100, k=s[0], variance=s[1]) for x in (sm, sn)] for s in starts}
-    w = bj.FmapWeights(orient=ORIENT_WEIGHT)
+    w = bj.FmapWeights(orient=defaults.orient_weight)
 
     def each(**geometry):
         return [np.asarray(bj.estimate_fmap(sm, sn, *d[s], k=s[0], weights=w, **geometry))
                 for s in starts]
 
     def shared():
-        return each(orientation_bases=bj.orientation_bases(
+        return each(orientation_bases=orientation_bases(
             sm, sn, source_mesh, target_mesh, max(k0 for k0, _ in starts)))
 
     med = []
     for run in (lambda: each(source_mesh=source_mesh, target_mesh=target_mesh), shared):
-        times = []
-        for _ in range(repeats + 1):
-            t0 = time.perf_counter()
-            maps = run()
-            times.append(time.perf_counter() - t0)
-        med.append((float(np.median(times[1:])), maps))
+        t = h.timed(run, repeats)
+        med.append((t.median, t.out))
     for a, b in zip(med[0][1], med[1][1]):
         np.testing.assert_allclose(b, a, atol=1e-5 * np.abs(a).max())
     return med[0][0], med[1][0]
@@ -332,7 +311,7 @@ def cross_triangulations(data: Path, seg: Path, out: Path, cache) -> int:
                 f"{r['map']} {r['method']} {r['accuracy']:.2f}" for r in part), file=sys.stderr)
     md = bar_summary(rows) + "\n\n" + report(rows, (30,)).markdown
     write_csv(rows, out / "segmentation_cross.csv")
-    write_text_atomic(out / "segmentation_cross.md", md + "\n")
+    write_text(out / "segmentation_cross.md", md + "\n")
     print(md)
     return 0
 
@@ -346,7 +325,7 @@ def tables_only(rows, out: Path, stem: str) -> int:
     """The rows' tables alone, as ``stem.csv`` and ``stem.md``."""
     rep = report(rows, (30,))
     write_csv(_without_labels(rows), out / f"{stem}.csv")
-    write_text_atomic(out / f"{stem}.md", rep.markdown + "\n")
+    write_text(out / f"{stem}.md", rep.markdown + "\n")
     print(rep.markdown)
     return 0
 
@@ -380,11 +359,11 @@ def bar_summary(rows) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--cache", default=str(Path.home() / ".cache" / "bsfjax-spectra"))
-    ap.add_argument("--repeats", type=int, default=5)
+    ap = h.parser(__doc__)
+    h.add_data(ap, type=str)
+    h.add_out(ap)
+    h.add_cache(ap, h.HOME_CACHE)
+    h.add_repeats(ap, 5)
     ap.add_argument("--quick", action="store_true", help="only p2p and refined, default map")
     ap.add_argument("--quick-maps", action="store_true",
                     help="only p2p and refined, through all three maps")
@@ -406,7 +385,8 @@ def main(argv=None) -> int:
                     help="FAUST registrations to FAUST_5k remeshes, with and without landmarks")
     args = ap.parse_args(argv)
     data = Path(args.data)
-    seg = data / "segmentations" / "smpl_vert_segmentation.json"
+    seg = data / h.SMPL_SEGMENTATION
+    h.require_data(seg, data / "faust")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.decimated:
@@ -450,7 +430,7 @@ def main(argv=None) -> int:
     if args.all_pairs:
         md = bar_summary(rows)
         write_csv(rows, out / "segmentation_allpairs.csv")
-        write_text_atomic(out / "segmentation_allpairs.md", md + "\n")
+        write_text(out / "segmentation_allpairs.md", md + "\n")
         print(md)
         return 0
     if args.few_landmarks:
@@ -472,29 +452,22 @@ def main(argv=None) -> int:
     # maps of a continuation on every vertex)
     peers = {"refined": dict(samples=est.samples), "p2p": dict(method="p2p"),
              "refined, 3 maps on every vertex": dict(method=bj.RefinedPullBack(n_vote=3))}
-    timed = {}
-    for name, kw in peers.items():
-        times = timed[name] = []
-        for _ in range(args.repeats + 1):
-            t0 = time.perf_counter()
-            bj.transfer_labels(sm, sn, lab, C=est.C, p2p=est.p2p, **kw)
-            times.append(time.perf_counter() - t0)
+    timed = {name: h.timed(lambda: bj.transfer_labels(sm, sn, lab, C=est.C, p2p=est.p2p, **kw),
+                           args.repeats) for name, kw in peers.items()}
     rep = report(rows, (30,))
     if rep.figure is not None:
         rep.figure(out / "segmentation_bench.png")
     write_csv(_without_labels(rows), out / "segmentation_bench.csv")
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    med = {name: float(np.median(t[1:])) for name, t in timed.items()}
+    med = {name: t.median for name, t in timed.items()}
     timing = (f"Default transfer after the map (transfer_labels, 'refined' on the map's 2000 "
               f"samples, 24 parts, FAUST 000→010, 6890 vertices): first call "
-              f"{timed['refined'][0]:.2f} s (compiled earlier in the run if a pair had these "
+              f"{timed['refined'].first:.2f} s (compiled earlier in the run if a pair had these "
               f"sizes), median of {args.repeats} warm calls "
               f"{med['refined']:.3f} s; in the same run " + ", ".join(
                   f"{name} {m:.3f} s" for name, m in med.items() if name != "refined") +
               f" ({med['refined, 3 maps on every vertex'] / med['refined']:.2f}× faster than "
-              f"the vote on every vertex); {os.cpu_count()} CPUs, load average {load:.1f}, "
-              f"{platform.machine()}.")
-    write_text_atomic(out / "segmentation_bench.md", rep.markdown + "\n\n" + timing + "\n")
+              f"the vote on every vertex); {h.cpus_note(load=True)}.")
+    write_text(out / "segmentation_bench.md", rep.markdown + "\n\n" + timing + "\n")
     print(timing)
     return 0
 

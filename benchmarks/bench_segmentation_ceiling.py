@@ -40,26 +40,25 @@ shapes (``faust/tr_reg_000, 001, 010, 011``).
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 import scipy.spatial
 
+import _harness as h
 import bsfjax as bj
-from bsfjax.experiments._datasets import load_dataset
-from bsfjax.internal import write_text_atomic
-from bsfjax.internal import ZOOMOUT_SAMPLES
+from bsfjax.experiments import load_dataset
 from bsfjax.experiments.segmentation import (N_LANDMARKS, _maps, gt_inverse, label_metrics,
                                              shape_labels)
 
-FAUST_PAIRS = [("000", "001"), ("010", "012"), ("020", "022"), ("000", "010"), ("001", "021"),
-               ("012", "022")]
-REMESHED_PAIRS = [("000", "001"), ("000", "010"), ("001", "011")]
+FAUST_PAIRS = h.SEGMENTATION_PAIRS["faust"]
+REMESHED_PAIRS = h.SEGMENTATION_PAIRS["faust_5k"]
 KS = (60, 100, 150, 200, 300)
 TORSO_PARTS = ("hips", "spine", "spine1", "spine2")
 TORSO_LANDMARKS = (8, 20)
+#: The farthest-point samples the default map's ZoomOut runs on.
+ZOOMOUT_SAMPLES = bj.MapEstimator().zoomout_samples
 
 
 def similarity_fit(X: np.ndarray, Y: np.ndarray):
@@ -237,15 +236,15 @@ def torso_landmarks(data: Path, template: np.ndarray, part_names, cache: str) ->
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--cache", default=str(Path.home() / ".cache" / "bsfjax-spectra"))
+    ap = h.parser(__doc__)
+    h.add_data(ap, type=str)
+    h.add_out(ap)
+    h.add_cache(ap, h.HOME_CACHE)
     args = ap.parse_args(argv)
     data, out = Path(args.data), Path(args.out)
+    h.require_data(data / h.SMPL_SEGMENTATION, data / "faust", data / "faust_5k")
     out.mkdir(parents=True, exist_ok=True)
-    template, part_names = bj.load_labels(data / "segmentations" /
-                                          "smpl_vert_segmentation.json")
+    template, part_names = bj.load_labels(data / h.SMPL_SEGMENTATION)
     text = ["Accuracy % against the `.vts` (sampleID) truth / the geometric truth:", "",
             *remeshed(data, template, args.cache), "",
             "Nearest-neighbour point map of the ground-truth functional map, accuracy %:", "",
@@ -256,7 +255,7 @@ def main(argv=None) -> int:
             "from keeping the geodesic distances to the 5 + "
             f"{TORSO_LANDMARKS[-1]} landmarks on the target's torso:", "",
             *torso_landmarks(data, template, part_names, args.cache)]
-    write_text_atomic(out / "segmentation_ceiling.md", "\n".join(text) + "\n")
+    h.write_text(out / "segmentation_ceiling.md", "\n".join(text) + "\n")
     print("\n".join(text))
     return 0
 

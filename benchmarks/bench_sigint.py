@@ -16,9 +16,7 @@ Needs ../shared/data (FAUST registrations and the SMPL segmentation).  Prints a 
 
 from __future__ import annotations
 
-import argparse
 import collections
-import json
 import os
 import random
 import signal
@@ -28,22 +26,18 @@ import tempfile
 import time
 from pathlib import Path
 
+import _harness as h
+
 #: The code under test: this checkout, or BSFJAX_ROOT (e.g. a `git archive` snapshot, so that
 #: editing the checkout during a long run does not change the code being interrupted).
-ROOT = Path(os.environ.get("BSFJAX_ROOT", Path(__file__).resolve().parents[1]))
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-if not DATA.exists():
-    DATA = Path("/work/shared/data")
+ROOT = Path(os.environ.get("BSFJAX_ROOT", h.ROOT))
+DATA = h.DATA if h.DATA.exists() else Path("/work/shared/data")
 
 
 def _inputs(work: Path) -> list[str]:
     import numpy as np
 
-    seg = json.loads((DATA / "segmentations" / "smpl_vert_segmentation.json").read_text())
-    lab = np.zeros(6890, int)
-    for i, (_, verts) in enumerate(sorted(seg.items())):
-        lab[verts] = i
-    np.savetxt(work / "labels.txt", lab, fmt="%d")
+    np.savetxt(work / "labels.txt", h.smpl_labels(DATA), fmt="%d")
     np.savetxt(work / "p2p.txt", np.arange(6890), fmt="%d")
     return [str(DATA / "faust" / "tr_reg_000.off"), str(DATA / "faust" / "tr_reg_001.off"),
             "--labels", str(work / "labels.txt"), "--map", "p2p", str(work / "p2p.txt"),
@@ -81,10 +75,12 @@ def _check_folder(out: Path, rc: int) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = h.parser(__doc__)
     ap.add_argument("--runs", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
+    h.require_data(*(DATA / "faust" / f"tr_reg_00{i}.off" for i in (0, 1)),
+                   DATA / h.SMPL_SEGMENTATION, option=None)
     # a benchmark started in the background (nohup … &) inherits SIGINT ignored, and so would
     # every child (an ignored signal stays ignored across exec): give them the default
     signal.signal(signal.SIGINT, signal.default_int_handler)

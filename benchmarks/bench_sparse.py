@@ -23,19 +23,15 @@ approximation errors is ``*_sklearn_max_diff_full``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 
+import _harness as h
 import bsfjax
-from bsfjax.internal import write_text_atomic
 from bsfjax.experiments import N_LANDMARKS, _functions, load_dataset, prepare_shapes
 from bsfjax import estimate_map
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def err(ref, est, mass) -> float:
@@ -43,16 +39,17 @@ def err(ref, est, mass) -> float:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--data", default=str(DATA / "faust"))
+    ap = h.parser(__doc__)
+    h.add_data(ap, "faust", type=str, help="FAUST folder")
     ap.add_argument("--pairs", type=int, default=2)
     ap.add_argument("--functions", type=int, default=20)
     ap.add_argument("--k", type=int, default=50)
     ap.add_argument("--sparsity", type=int, default=30)
     ap.add_argument("--sklearn", action="store_true", help="float64 OMP cross-check")
-    ap.add_argument("--cache", default=None, help="eigenbasis cache folder")
-    ap.add_argument("--out", default=None, help="JSON output")
+    h.add_cache(ap, None, help="eigenbasis cache folder")
+    h.add_out(ap, required=False, help="JSON output")
     args = ap.parse_args(argv)
+    h.require_data(args.data)
     ds = load_dataset(args.data)
     pairs = ds.pairs(args.pairs, 0)
     k, S = args.k, args.sparsity
@@ -131,7 +128,7 @@ def main(argv=None) -> dict:
     print("mean:", json.dumps({kk: round(v, 4) for kk, v in mean.items()}))
     out = {"k": k, "sparsity": S, "functions": args.functions, "pairs": results, "mean": mean}
     if args.out:
-        write_text_atomic(args.out, json.dumps(out, indent=1))
+        h.write_json(args.out, out, indent=1)
     return out
 
 

@@ -25,31 +25,18 @@ spans of the first ``j`` eigenvectors (``j`` = 25, 50, 100: the eigenspaces)::
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse.linalg
 
+import _harness as h
 import bsfjax
-from bsfjax.internal import write_text_atomic
 from bsfjax.internal import subdivide
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-
-
-def median_time(fn, repeats):
-    fn()
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts))
+DATA = h.DATA
 
 
 def accuracy(evals, evecs, W, a, ref_evals=None, ref_evecs=None):
@@ -114,21 +101,24 @@ def large(levels, k, out):
                   f"{r['scipy_eigsh']['max_relative_residual']:.1e}) | "
                   f"{r['spectrum']['a_orthonormality']:.1e} |")
     out = Path(out)
-    write_text_atomic(out / "spectrum_large.json", json.dumps(rows, indent=2))
-    write_text_atomic(out / "spectrum_large.md", "\n".join(md) + "\n")
+    h.write_json(out / "spectrum_large.json", rows)
+    h.write_text(out / "spectrum_large.md", "\n".join(md) + "\n")
     print("\n".join(md))
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="bench-results")
-    ap.add_argument("--repeats", type=int, default=5)
+    ap = h.parser(__doc__)
+    h.add_out(ap, default="bench-results")
+    h.add_repeats(ap, 5)
     ap.add_argument("-k", type=int, default=100)
     ap.add_argument("--large", type=int, nargs="*", default=None,
                     help="Loop subdivision levels of the TOSCA cat to time instead")
     args = ap.parse_args(argv)
     if args.large is not None:
+        h.require_data(DATA / "tosca" / "cat" / "cat0.off", option=None)
         return large(args.large or [1, 2], args.k, args.out)
+    h.require_data(DATA / "faust" / "tr_reg_000.off", DATA / "tosca_10k" / "cat" / "cat0.off",
+                   option=None)
     import igl
     import robust_laplacian
 
@@ -139,21 +129,22 @@ def main(argv=None):
     rows = []
     for name, m in meshes.items():
         V, F = np.asarray(m.vertices), np.asarray(m.faces)
-        t_ours = median_time(lambda: bsfjax.laplacian(m), args.repeats)
-        t_igl = median_time(lambda: (igl.cotmatrix(V, F),
-                                     igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_VORONOI)), args.repeats)
-        t_rob = median_time(lambda: robust_laplacian.mesh_laplacian(V, F), args.repeats)
+        t_ours = h.timed(lambda: bsfjax.laplacian(m), args.repeats).median
+        t_igl = h.timed(lambda: (igl.cotmatrix(V, F),
+                                 igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_VORONOI)),
+                        args.repeats).median
+        t_rob = h.timed(lambda: robust_laplacian.mesh_laplacian(V, F), args.repeats).median
         W, A = bsfjax.laplacian(m)
         reps = max(1, args.repeats // 2)
-        t_eig = median_time(lambda: bsfjax.spectrum_from_operators(W, A, args.k), reps)
+        t_eig = h.timed(lambda: bsfjax.spectrum_from_operators(W, A, args.k), reps).median
         Wc, Ac = W.tocsc(), A.tocsc()
-        t_scipy = median_time(lambda: scipy.sparse.linalg.eigsh(Wc, args.k, M=Ac, sigma=-0.01,
-                                                                which="LM"), reps)
+        t_scipy = h.timed(lambda: scipy.sparse.linalg.eigsh(Wc, args.k, M=Ac, sigma=-0.01,
+                                                            which="LM"), reps).median
         rows.append(dict(mesh=name, n=m.n_vertices, assembly_bsfjax_s=t_ours, assembly_igl_s=t_igl,
                          assembly_robust_s=t_rob, eig_bsfjax_s=t_eig, eig_scipy_s=t_scipy,
                          assembly_ratio_igl=t_igl / t_ours, eig_ratio_scipy=t_scipy / t_eig))
         print(rows[-1], flush=True)
-    machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, {platform.system()}"
+    machine = h.short_machine()
     md = [f"Laplacian assembly and k={args.k} eigensolve ({machine}; median of {args.repeats}; "
           "ratio > 1 means bsfjax is faster)", "",
           "| mesh | n | assembly bsfjax | libigl | robust-laplacian | igl/bsfjax | eigsh bsfjax | bare scipy | scipy/bsfjax |",
@@ -163,8 +154,8 @@ def main(argv=None):
                   f" | {1e3*r['assembly_robust_s']:.1f} ms | {r['assembly_ratio_igl']:.2f}x | {r['eig_bsfjax_s']:.2f} s"
                   f" | {r['eig_scipy_s']:.2f} s | {r['eig_ratio_scipy']:.2f}x |")
     out = Path(args.out)
-    write_text_atomic(out / "spectrum.json", json.dumps({"machine": machine, "rows": rows}, indent=2))
-    write_text_atomic(out / "spectrum.md", "\n".join(md) + "\n")
+    h.write_json(out / "spectrum.json", {"machine": machine, "rows": rows})
+    h.write_text(out / "spectrum.md", "\n".join(md) + "\n")
     print("\n".join(md))
 
 

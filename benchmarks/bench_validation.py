@@ -1,8 +1,8 @@
 """Benchmark: the cost of the input checks of issue 8, and a longer reader-fuzzing campaign.
 
 * ``load_mesh`` on the real meshes, split into reading and the defect scan
-  (:func:`bsfjax._mesh._mesh.mesh_report`: duplicate vertices/faces, non-manifold edges, components);
-* :func:`bsfjax._mesh._mesh.mesh_edges` (1-D int64 keys) against the former
+  (``bsfjax.mesh_report``: duplicate vertices/faces, non-manifold edges, components);
+* ``bsfjax.internal.mesh_edges`` (1-D int64 keys) against the former
   ``np.unique(..., axis=0)`` on sorted edge rows (same output, checked);
 * ``--fuzz SECONDS``: mutated OFF/PLY/OBJ/STL files through ``load_mesh`` for that long
   (the same mutations as ``tests/test_fuzz_readers.py``, drawn with ``random``), counting
@@ -15,9 +15,6 @@ Median of ``--repeats`` runs.  Writes JSON and a Markdown table to ``--out`` (a 
 
 from __future__ import annotations
 
-import argparse
-import json
-import platform
 import random
 import sys
 import tempfile
@@ -27,15 +24,13 @@ from pathlib import Path
 
 import numpy as np
 
+import _harness as h
 import bsfjax
-from bsfjax.internal import write_text_atomic
-from bsfjax.internal import mesh_edges, mesh_report
+from bsfjax import mesh_report
+from bsfjax.internal import mesh_edges
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_spectrum import median_time  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data"
+ROOT = h.ROOT
+DATA = h.DATA
 MESHES = ["faust/tr_reg_000.off", "faust_5k/tr_reg_000.off", "tosca_10k/cat/cat0.off",
           "tosca/cat/cat0.off"]
 
@@ -56,12 +51,12 @@ def bench_meshes(repeats):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             mesh = bsfjax.load_mesh(p)
-            t_load = median_time(lambda: bsfjax.load_mesh(p), repeats)
-        t_report = median_time(lambda: mesh_report(mesh), repeats)
+            t_load = h.timed(lambda: bsfjax.load_mesh(p), repeats).median
+        t_report = h.timed(lambda: mesh_report(mesh), repeats).median
         new, old = mesh_edges(mesh.faces), _old_edges(mesh.faces)
         assert all(np.array_equal(a, b) for a, b in zip(new, old))
-        t_new = median_time(lambda: mesh_edges(mesh.faces), repeats)
-        t_old = median_time(lambda: _old_edges(mesh.faces), repeats)
+        t_new = h.timed(lambda: mesh_edges(mesh.faces), repeats).median
+        t_old = h.timed(lambda: _old_edges(mesh.faces), repeats).median
         rows.append({"mesh": rel, "n_vertices": mesh.n_vertices, "load_mesh_s": t_load,
                      "mesh_report_s": t_report, "edges_new_s": t_new, "edges_old_s": t_old})
         print(rows[-1], flush=True)
@@ -119,18 +114,20 @@ def fuzz(seconds):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--out", default="bench-results")
-    ap.add_argument("--repeats", type=int, default=5)
+    ap = h.parser(__doc__)
+    h.add_out(ap, default="bench-results")
+    h.add_repeats(ap, 5)
     ap.add_argument("--fuzz", type=float, default=0.0, help="seconds of reader fuzzing")
     args = ap.parse_args()
-    res = {"machine": platform.machine(), "python": platform.python_version(),
+    h.require_data(DATA, option=None)
+    machine = h.machine_facts(with_jax=False)
+    res = {"machine": machine["arch"], "python": machine["python"],
            "meshes": bench_meshes(args.repeats)}
     if args.fuzz > 0:
         res["fuzz"] = fuzz(args.fuzz)
         print(res["fuzz"]["files"], "files,", len(res["fuzz"]["failures"]), "failures")
     out = Path(args.out)
-    write_text_atomic(out / "bench_validation.json", json.dumps(res, indent=1) + "\n")
+    h.write_json(out / "bench_validation.json", res, indent=1)
     lines = ["| mesh | n | load_mesh (s) | mesh_report (s) | edges new (s) | edges old (s) |",
              "|---|---|---|---|---|---|"]
     lines += [f"| {r['mesh']} | {r['n_vertices']} | {r['load_mesh_s']:.3f} | "
@@ -139,7 +136,7 @@ def main():
     if "fuzz" in res:
         lines.append(f"\nfuzz: {res['fuzz']['files']} files in {args.fuzz:.0f} s, "
                      f"{len(res['fuzz']['failures'])} non-MeshError failures")
-    write_text_atomic(out / "bench_validation.md", "\n".join(lines) + "\n")
+    h.write_text(out / "bench_validation.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

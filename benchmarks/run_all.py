@@ -50,29 +50,23 @@ import os
 # without slowing the peers (pipeline peer 311 ms with it, 291–332 ms without).
 os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import sys
-import time
-import warnings
-from pathlib import Path
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
 
-import jax
-import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+import scipy.sparse as sp  # noqa: E402
+import scipy.sparse.linalg  # noqa: E402
 
-import bsfjax
-from bsfjax.internal import write_text_atomic
-from bsfjax.internal import subdivide
+import _harness as h  # noqa: E402
+import bsfjax  # noqa: E402
+from _harness import (  # noqa: E402
+    GAMMA, TAUS, PeakRSS, numpy_build, numpy_fps, numpy_transfer, pyfm_mesh, random_regions,
+    rel_residual, sk_lasso, sk_omp,
+)
+from bsfjax.internal import DENSE_BUDGET_BYTES, subdivide  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_coding import random_regions, rel_residual, sk_lasso, sk_omp  # noqa: E402
-from bench_fmaps import pyfm_mesh  # noqa: E402
-from bench_frame import GAMMA, TAUS, numpy_build, numpy_fps, numpy_transfer  # noqa: E402
-from bench_large import PeakRSS, machine  # noqa: E402
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 K, K_FIT, FRACTION, SPARSITY, N_FUNCTIONS = 100, 30, 0.05, 10, 100
 EPS_FRACTION, MAX_ATOMS, LAM = 0.3, 256, 0.01
 
@@ -91,16 +85,10 @@ def load_size(name: str, data: Path):
 
 
 def timed(fn, repeats: int):
-    """(median seconds of ``repeats`` calls after one warm-up call, result, warm-up seconds)."""
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(fn())
-    first = time.perf_counter() - t0
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = jax.block_until_ready(fn())
-        ts.append(time.perf_counter() - t0)
-    return (float(np.median(ts)) if ts else first), out, first
+    """(median seconds of ``repeats`` calls after one warm-up call — the warm-up's own when
+    ``repeats`` is 0 —, result, warm-up seconds)."""
+    t = h.timed(fn, repeats)
+    return t.median, t.out, t.first
 
 
 def interleaved(ours, peer, repeats: int):
@@ -211,8 +199,8 @@ def run_size(suite: Suite, size: str):
 
     # sampling
     first = int(np.random.default_rng(0).integers(n))
-    n_c = bsfjax._sampling._fps.n_samples(FRACTION, n)
     t_ours, centers, _ = timed(lambda: bsfjax.farthest_point_sampling(src_mesh, FRACTION), rep)
+    n_c = len(centers)  # the number of samples FRACTION asks for
     t_np, _, _ = timed(lambda: numpy_fps(V, first, n_c), rep)
     suite.add(size, n, "farthest point sampling 5%", t_ours, "numpy loop", t_np, repeats=rep)
 
@@ -249,7 +237,7 @@ def run_size(suite: Suite, size: str):
     F32 = F.astype(np.float32)
     eps = (EPS_FRACTION * np.linalg.norm(F, axis=1)) ** 2
     Bd = np.asarray(B_np, np.float64) if dense_peer else None
-    gram_fits = q * q * 8 <= bsfjax._frame._build.DENSE_BUDGET_BYTES or kind == "Frame"
+    gram_fits = q * q * 8 <= DENSE_BUDGET_BYTES or kind == "Frame"
     pf = N_FUNCTIONS if size == "7k" else args.peer_functions
     sub = slice(0, pf)
     factor = N_FUNCTIONS / pf
@@ -265,7 +253,7 @@ def run_size(suite: Suite, size: str):
                                   factor)]),
     }
     alpha_omp = None
-    for method in args.methods.split(","):
+    for method in h.name_list(args.methods):
         opts, peers = methods[method]
         if method in ("lstsq", "lasso") and not gram_fits:
             suite.add(size, n, f"encode {method}", None, "—", None,
@@ -363,21 +351,24 @@ def markdown(rows, mach, sizes):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, required=True, help="folder for results.json/results.md")
+    ap = h.parser(__doc__)
+    h.add_out(ap, type=Path, help="folder for results.json/results.md")
     ap.add_argument("--sizes", default="7k,50k")
-    ap.add_argument("--data", type=Path, default=DATA)
-    ap.add_argument("--repeats", type=int, default=5)
+    h.add_data(ap)
+    h.add_repeats(ap, 5)
     ap.add_argument("--methods", default="lstsq,omp,omp_error,lasso")
     ap.add_argument("--peer-functions", type=int, default=4,
                     help="functions given to per-function peers above 7k (time scaled to 100)")
     ap.add_argument("--dense-peer-gib", type=float, default=3.0,
                     help="largest dense float64 frame the numpy peer may form")
-    ap.add_argument("--cache", type=Path, default=Path("/tmp/bsfjax-spectra"))
+    h.add_cache(ap, h.TMP_CACHE, type=Path, help="spectrum cache folder (target shapes)")
     args = ap.parse_args(argv)
+    sizes = h.name_list(args.sizes)
+    h.require_data(*(args.data / "faust" / f"tr_reg_00{i}.off" for i in (0, 1) if "7k" in sizes),
+                   *(args.data / "tosca_10k" / "cat" / f"cat{i}.off" for i in (0, 1)
+                     if set(sizes) - {"7k"}))
     suite = Suite(args)
-    mach = machine()
-    sizes = [s for s in args.sizes.split(",") if s]
+    mach = h.describe_machine()
     t0 = time.perf_counter()
     with PeakRSS() as mem:
         for size in sizes:
@@ -386,10 +377,10 @@ def main(argv=None):
                       "taus": TAUS, "gamma": GAMMA, "sparsity": SPARSITY,
                       "n_functions": N_FUNCTIONS, "rows": suite.rows,
                       "wall_seconds": time.perf_counter() - t0}
-            write_text_atomic(args.out / "results.json", json.dumps(result, indent=2) + "\n")
-            write_text_atomic(args.out / "results.md", markdown(suite.rows, mach, sizes))
-    result["peak_rss_gib"] = mem.peak / 2**30
-    write_text_atomic(args.out / "results.json", json.dumps(result, indent=2) + "\n")
+            h.write_json(args.out / "results.json", result)
+            h.write_text(args.out / "results.md", markdown(suite.rows, mach, sizes))
+    result["peak_rss_gib"] = mem.peak / h.GIB
+    h.write_json(args.out / "results.json", result)
     print(markdown(suite.rows, mach, sizes))
     print(f"wrote {args.out}/results.json and results.md ({time.perf_counter() - t0:.0f} s)")
 

@@ -3,70 +3,60 @@
 Sparse representation and transfer of step functions on manifolds, after S. Melzi,
 "Sparse representation of step functions on manifolds", Computers & Graphics 82 (2019).
 
-The public names are grouped by pipeline stage, in the order data flows through them: mesh,
-operators and spectrum, sampling, frame, coding, transfer, functional maps, mesh level,
-metrics; plus the modules ``bsfjax.experiments`` (the paper's tables and figures),
-``bsfjax.plot`` and ``bsfjax.cli``.  The API reference (``docs/api/``) has one page per
-stage; ``docs/architecture.md`` maps the private sub-package behind each stage and their
-layers.  ``bsfjax.internal`` holds the names one level below, for tests and benchmarks.
+The public API, by pipeline stage (mesh → spectrum → frame → coefficients → transfer →
+metrics, with functional maps feeding the transfer); each stage is one private sub-package,
+and docs/architecture.md lists their modules.  `bsfjax.plot` draws figures, `bsfjax.cli` is
+the `bsfjax` command, `bsfjax.experiments` reproduces the paper's tables and figures, and
+`bsfjax.internal` holds the building blocks below this API.
 """
 
-# the ``bsfjax`` command handles Ctrl-C from here on, before the heavy imports below (a no-op
-# when bsfjax is imported as a library; see _signals)
-from ._util import install_sigint_handler
-
-install_sigint_handler()
-
-from ._util import VERSION, BSFError, MeshError
+from ._util import BSFError, MeshError, VERSION
 
 # mesh
-from ._mesh import Mesh, MeshReport, load_mesh, mesh_report
-from ._mesh import save_mesh
-from ._mesh import ExamplePair, example_mesh, example_pair
+from ._mesh import (
+    ExamplePair, LabelFile, Mesh, MeshReport, example_mesh, example_pair, load_labels,
+    load_mesh, mesh_report, save_labels, save_mesh,
+)
 
 # operators and spectrum
-from ._spectral import laplacian
-from ._spectral import Spectrum, interval_spectrum, spectrum, spectrum_from_operators, stack_spectra
+from ._spectral import (
+    Spectrum, interval_spectrum, laplacian, spectrum, spectrum_from_operators, stack_spectra,
+)
 
 # sampling
-from ._sampling import Subsample, farthest_point_sampling, subsample
-from ._sampling import geodesic_distances, geodesic_error
+from ._sampling import (
+    Subsample, farthest_point_sampling, geodesic_distances, geodesic_error, subsample,
+)
 
 # frame
-from ._frame import AbstractFrame
-from ._frame import Frame
-from ._frame import SparseFrame
-from ._frame import build_frame, transfer_frame
-from ._frame import adaptive_taus, prune_frame
+from ._frame import (
+    AbstractFrame, Frame, SparseFrame, adaptive_taus, build_frame, prune_frame, transfer_frame,
+)
 
 # coding
-from ._coding import AbstractCoder, CodingInfo
-from ._coding import LeastSquares
-from ._coding import OMP, ErrorOMP
-from ._coding import Lasso
-from ._coding import decode, encode
+from ._coding import AbstractCoder, CodingInfo, ErrorOMP, Lasso, LeastSquares, OMP, decode, encode
 
 # transfer
-from ._transfer import BSF, METHODS, AbstractMethod, GeodesicBalls, Pair, ProductBasis, PullBack, RefinedPullBack, SaturatedHeat, SpectralProjection
-from ._transfer import TransferResult, stack_pairs, transfer, transfer_pairs
+from ._transfer import (
+    AbstractMethod, BSF, GeodesicBalls, METHODS, Pair, ProductBasis, PullBack, RefinedPullBack,
+    SaturatedHeat, SpectralProjection, TransferResult, stack_pairs, transfer, transfer_pairs,
+)
 
 # functional maps
-from ._maps import hks, wks
-from ._maps import fmap_from_p2p, fmap_to_p2p, icp_refine, zoomout
-from ._maps import refine_point_maps
-from ._maps import FmapWeights, estimate_fmap, fmap_energy
-from ._maps import choose_map, map_distortion, orientation_agreement
+from ._maps import (
+    FmapWeights, MapEstimate, MapEstimator, choose_map, estimate_fmap, estimate_map,
+    fmap_energy, fmap_from_p2p, fmap_to_p2p, hks, icp_refine, map_distortion, mirror_symmetry,
+    orientation_agreement, refine_point_maps, wks, zoomout,
+)
 
 # mesh-level entry points
-from ._maps import MapEstimate, estimate_map, mirror_symmetry
-from ._pipeline import REGIMES, LabelTransfer, transfer_labels, transfer_values
-from ._pipeline import face_labels_from_vertices, transfer_face_labels
-from ._pipeline import TargetTransfer, transfer_collection
+from ._pipeline import (
+    LabelTransfer, REGIMES, TargetTransfer, face_labels_from_vertices, transfer_collection,
+    transfer_face_labels, transfer_labels, transfer_values,
+)
 
 # metrics and test functions
-from ._metrics import relative_error
-from ._metrics import indicators_to_labels, labels_to_indicators, random_indicators
-from ._mesh import LabelFile, load_labels, save_labels
+from ._metrics import indicators_to_labels, labels_to_indicators, random_indicators, relative_error
 
 __version__ = VERSION
 
@@ -97,7 +87,7 @@ __all__ = [
     "map_distortion", "orientation_agreement",
     "choose_map",
     # mesh level
-    "MapEstimate", "estimate_map", "mirror_symmetry", "LabelTransfer", "REGIMES",
+    "MapEstimate", "MapEstimator", "estimate_map", "mirror_symmetry", "LabelTransfer", "REGIMES",
     "transfer_values", "transfer_labels",
     "transfer_face_labels", "face_labels_from_vertices", "transfer_collection", "TargetTransfer",
     # metrics

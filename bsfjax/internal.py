@@ -17,9 +17,8 @@ from ._spectral import (
     cotangent_stiffness, has_cholmod, interval_operators, mass_matrix,
 )
 from ._maps import (
-    LANDMARK_FREE_STARTS, ORIENTATION_SLACK, ORIENT_WEIGHT, OrientationBasis, TURN_RADIUS,
-    TURN_SAMPLES, ZOOMOUT_SAMPLES, hks_times, nearest_neighbors, orientation_bases,
-    refinement_sizes, wks_energies,
+    OrientationBasis, hks_times, nearest_neighbors, orientation_bases, refinement_sizes,
+    wks_energies,
 )
 from ._frame import (
     ADAPTIVE_N_SCALES, DENSE_BUDGET_BYTES, decode_host, decode_traced, effective_taus,
@@ -44,9 +43,8 @@ from ._cli import (
 __all__ = [
     "ADAPTIVE_N_SCALES", "BUCKET_FACTORS", "CLIError", "CODERS", "DENSE_BUDGET_BYTES",
     "FaceShares", "JOINTS",
-    "LABEL_NAMES", "LANDMARK_FREE_STARTS", "MERGE_PADDING", "ORIENTATION_SLACK",
-    "ORIENT_WEIGHT", "OrientationBasis", "POSES", "TURN_DOUBT", "TURN_RADIUS", "TURN_SAMPLES",
-    "ZOOMOUT_SAMPLES", "as_coder", "as_method", "atomic_path", "clean_mesh",
+    "LABEL_NAMES", "MERGE_PADDING", "OrientationBasis", "POSES", "TURN_DOUBT", "as_coder",
+    "as_method", "atomic_path", "clean_mesh",
     "cotangent_stiffness", "decide_face_labels", "decode_host", "decode_traced", "edge_graph",
     "effective_taus", "ell_matmul", "ell_rmatmul", "example_landmarks", "face_label_shares",
     "face_scores", "format_table", "geodesic_ball_radii", "has_cholmod", "hks_times",

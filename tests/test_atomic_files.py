@@ -1,5 +1,5 @@
 """Files bsfjax writes are atomic (old or new file, never a partial one) and caches recompute
-when corrupt (issue 8, "Files").
+when corrupt.
 
 Each writer is interrupted midway by making its serializer write some bytes to the temporary
 file and then raise; the previous file must survive byte for byte and no temporary file may be

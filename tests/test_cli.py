@@ -293,15 +293,15 @@ def test_example_command_writes_a_pair_that_transfer_reads(tmp_path, capsys):
 def test_transfer_warns_when_the_turn_check_is_in_doubt(tmp_path, monkeypatch, capsys):
     """Without landmarks, a map whose turn check is in doubt (``MapEstimate.turn_doubtful``)
     is said to be possibly turned, with the advice; a map not in doubt is not."""
-    import bsfjax._maps as me
+    import bsfjax._cli._transfer as cli_transfer
     d = tmp_path / "ex"
     assert main(["example", "--out", str(d), "--levels", "2"]) == 0
     args = ["transfer", str(d / "source.ply"), str(d / "target.ply"), "--labels",
             str(d / "labels.txt"), "-k", "20", "--out", str(tmp_path / "out.txt")]
-    real = me.estimate_map
+    real = cli_transfer.map_estimator
     for doubt in (True, False):
-        monkeypatch.setattr(me, "estimate_map",
-                            lambda *a, **kw: real(*a, **kw)._replace(turn_doubtful=doubt))
+        monkeypatch.setattr(cli_transfer, "map_estimator",
+                            lambda *a, doubt=doubt: doubting(real(*a), doubt))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             assert main(args) == 0
@@ -309,6 +309,18 @@ def test_transfer_warns_when_the_turn_check_is_in_doubt(tmp_path, monkeypatch, c
                 "swapped)" in str(w.message)]
         assert said == ([TURN_DOUBT] if doubt else [])
         assert "no landmarks: kept start" in capsys.readouterr().err
+
+
+def doubting(estimator, doubt: bool):
+    """The estimator, its maps' turn check in doubt (or not)."""
+    import dataclasses
+
+    class Doubting(type(estimator)):
+        def __call__(self, *args, **kwargs):
+            return super().__call__(*args, **kwargs)._replace(turn_doubtful=doubt)
+
+    return Doubting(**{f.name: getattr(estimator, f.name)
+                       for f in dataclasses.fields(estimator)})
 
 
 def test_truth_needs_labels_and_the_target_length(cli_files, capsys):

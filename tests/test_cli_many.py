@@ -280,11 +280,12 @@ def test_labels_per_triangle_come_back_per_triangle(files, tmp_path, capsys):
 def test_summary_says_when_the_turn_check_is_in_doubt(files, tmp_path, monkeypatch, capsys):
     """Without landmarks or ``--one-start``, each target's map is estimate_map's choice among
     starts: its turn check's doubt goes into summary.json, and a doubt is said per target."""
-    import bsfjax._pipeline._collection as coll
+    import bsfjax._cli._io as cli_io
     from bsfjax.internal import TURN_DOUBT
-    real = coll.estimate_map
-    monkeypatch.setattr(coll, "estimate_map",
-                        lambda *a, **kw: real(*a, **kw)._replace(turn_doubtful=True))
+
+    from .test_cli import doubting
+    real = cli_io.map_estimator
+    monkeypatch.setattr(cli_io, "map_estimator", lambda *a: doubting(real(*a), True))
     out = tmp_path / "doubt"
     argv = [a for a in _argv(files, out, files / "tg" / "t506.ply") if a != "--one-start"]
     assert main(argv) == 0

@@ -192,7 +192,7 @@ def test_sparse_frames_are_validated_like_dense_ones(shapes):
     nan = np.zeros((1, sparse.n_atoms), np.float32)
     nan[0, 3] = np.nan
     for fr in (dense, sparse):
-        # huge values are rescaled on the host (issue 18), the same for both kinds of frame
+        # huge values are rescaled on the host, the same for both kinds of frame
         a = np.asarray(encode(fr, huge, "omp"))
         assert np.all(np.isfinite(a))
         np.testing.assert_allclose(a * 1e-30, np.asarray(encode(fr, huge * 1e-30, "omp")),

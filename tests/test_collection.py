@@ -29,7 +29,7 @@ def test_merge_buckets_trades_padding_for_compilations():
     from bsfjax.internal import MERGE_PADDING, merge_buckets
 
     six = [size_bucket(n) for n in (6890, 6201, 5512, 4823, 4134, 3446)]
-    assert set(merge_buckets(six).values()) == {8192}  # the issue's six targets: one size
+    assert set(merge_buckets(six).values()) == {8192}  # six FAUST-like targets: one size
     many = [4096] * 30 + [8192] * 50  # 30 · 4096 padded vertices > MERGE_PADDING: kept apart
     assert merge_buckets(many) == {4096: 4096, 8192: 8192}
     # exactly at the bound merges, one vertex over does not
@@ -157,7 +157,7 @@ def test_labels_of_triangles_equal_the_one_pair_path(collection):
 
 
 def test_one_start_runs_targets_without_landmarks_through_the_batched_stages(collection):
-    """``starts=((k, WKS_VARIANCE),)``: a target without landmarks gets the single start's
+    """``starts=((k, wks_variance),)``: a target without landmarks gets the single start's
     map from the padded stages, equal to estimate_map with that start (and not the default's
     choice among starts, which is another map here)."""
     small, targets, _, default = collection
@@ -181,6 +181,51 @@ def test_one_start_runs_targets_without_landmarks_through_the_batched_stages(col
                                  starts=((0, 7.0),)))
 
 
+def test_the_collection_follows_its_estimators_fields(collection):
+    """A given [`MapEstimator`]: the batched stages follow its ZoomOut step and its single
+    start's WKS variance (the estimator's own map at ``k`` and ``2k``, not the default's), and a
+    target without landmarks gets the estimator's choice among its starts; the map options
+    are not given beside it."""
+    import dataclasses
+    small, targets, _, _ = collection
+    target = targets[0]
+    sm, sn = bsfjax.spectrum(small.source, 20), bsfjax.spectrum(target, 20)
+    meshes = dict(source_mesh=small.source, target_mesh=target)
+    kw = dict(method="p2p", k=10)
+
+    def run(estimator):
+        return dict(transfer_collection(small.source, small.labels, [target], **kw,
+                                        estimator=estimator))[0]
+
+    default = dict(transfer_collection(small.source, small.labels, [target], **kw,
+                                       zoomout_samples=300, starts=((10, 7.0),)))[0]
+    # ZoomOut's step: the estimator's own map, bit for bit (not the default step's)
+    step = bsfjax.MapEstimator(k=99, zoomout_samples=300, starts=((10, 7.0),), zoomout_step=1)
+    got = run(step)
+    own = dataclasses.replace(step, k=10, refine_to=20)(sm, sn, **meshes)
+    np.testing.assert_array_equal(got.p2p, own.p2p)
+    np.testing.assert_allclose(got.C, own.C, atol=1e-4)
+    assert np.sum(default.p2p != own.p2p) > 50
+    # the single start's WKS variance: the estimator's own map up to the solver's tolerance
+    # (11 of 506 vertices differ; 373 from the default variance's map)
+    wider = bsfjax.MapEstimator(zoomout_samples=300, starts=((10, 3.5),), wks_variance=3.5)
+    got = run(wider)
+    own = dataclasses.replace(wider, k=10, refine_to=20)(sm, sn, **meshes)
+    assert np.mean(got.p2p == own.p2p) > 0.95 and np.mean(default.p2p == own.p2p) < 0.5
+    np.testing.assert_allclose(got.C, own.C, atol=1e-2)
+    several = bsfjax.MapEstimator(zoomout_samples=300, starts=((10, 3.5), (20, 7.0)),
+                                  derived_landmarks=0, turn_check=False)
+    got = run(several)
+    own = dataclasses.replace(several, k=10, refine_to=20)(sm, sn, **meshes)
+    np.testing.assert_array_equal(got.p2p, own.p2p)
+    assert own.start is not None and got.turn_doubtful is None  # (no turn check)
+    with pytest.raises(BSFError, match="give n_energies, zoomout_samples and starts as its"):
+        next(transfer_collection(small.source, small.labels, [target], k=10, estimator=step,
+                                 starts=((10, 7.0),)))
+    with pytest.raises(BSFError, match="estimator must be a bsfjax.MapEstimator"):
+        next(transfer_collection(small.source, small.labels, [target], k=10, estimator="one"))
+
+
 def test_source_operators_follow_each_targets_landmarks():
     """The source's share of the estimation problem is computed once per set of source
     landmarks and reused: a target whose source landmarks differ from
@@ -200,7 +245,7 @@ def test_source_operators_follow_each_targets_landmarks():
 
 def test_targets_in_other_units():
     """A target in millimetres (×1000) or in kilometres: the point map and labels of the same
-    target in the source's units, ``C`` ×s (the one-pair path's invariance, issue 14)."""
+    target in the source's units, ``C`` ×s (the one-pair path's invariance)."""
     small = bsfjax.example_pair(levels=1)
     lm = ([0, 100, 200, 300],) * 2
     targets = [bsfjax.Mesh(small.target.vertices * s, small.target.faces)

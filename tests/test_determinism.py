@@ -1,4 +1,4 @@
-"""Same inputs and seed give bit-identical results on the same machine (issue 8, item 6).
+"""Same inputs and seed give bit-identical results on the same machine.
 
 The whole pipeline — spectrum (ARPACK path), farthest point sampling in its three metrics,
 random indicators, frame build and transfer, the four coders, descriptors, map estimation and

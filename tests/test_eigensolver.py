@@ -13,8 +13,9 @@ import scipy.sparse as sp
 
 import bsfjax
 from bsfjax import BSFError
-from bsfjax._spectral._eigensolver import ORTH_LEVEL, MissedEigenvalue, _cholqr, _orthonormalize, \
-    _rotate_in_place, block_lanczos, factorize, has_cholmod
+from bsfjax._spectral._block_basis import ORTH_LEVEL, _cholqr, _orthonormalize, _rotate_in_place
+from bsfjax._spectral._eigensolver import MissedEigenvalue, block_lanczos
+from bsfjax._spectral._factorize import factorize, has_cholmod
 from bsfjax.internal import interval_operators
 
 from .conftest import icosphere
@@ -226,7 +227,7 @@ def test_mapped_basis_and_released_tail():
     # kept are intact, also when they end inside a page
     import mmap
 
-    from bsfjax._spectral._eigensolver import _mapped_empty, _release_after
+    from bsfjax._spectral._block_basis import _mapped_empty, _release_after
     n, m, k = 1000, 12, 5
     Q, buf = _mapped_empty(n, m)
     assert Q.shape == (n, m) and Q.flags.f_contiguous and Q.flags.writeable
@@ -261,7 +262,7 @@ def test_method_option_and_cache_key(tmp_path, sphere3):
     assert spec_mod._resolve_method("auto", 500, 10) == "dense"
     assert spec_mod._resolve_method("auto", 5000, 10) == "lanczos"  # ARPACK is faster there
     assert spec_mod._resolve_method("auto", 50_000, 10) == ("block" if has_cholmod() else "lanczos")
-    # from 45 eigenpairs the block solver is the faster at any size (stop 29, k = 100 at 5.5K:
+    # from 45 eigenpairs the block solver is the faster at any size (k = 100 at 5.5K:
     # 0.26 s against 0.36 s; k = 45 at 5.0K: 0.12 s against 0.18 s)
     assert spec_mod._resolve_method("auto", 5000, 45) == ("block" if has_cholmod() else "lanczos")
     assert spec_mod._resolve_method("auto", 5000, 44) == "lanczos"

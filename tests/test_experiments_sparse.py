@@ -1,4 +1,4 @@
-"""The ``sparse`` experiment (issue 9, beyond the paper): :mod:`bsfjax.experiments.sparse`."""
+"""The ``sparse`` experiment (beyond the paper): :mod:`bsfjax.experiments.sparse`."""
 
 from __future__ import annotations
 

@@ -50,7 +50,7 @@ def test_regions_are_not_discs_and_irregularity_zero_gives_graph_balls(pair):
     F = random_indicators(mesh, 5, seed=1, irregularity=0.0)
     # with irregularity 0 every region is a sub-level set of the edge-length graph distance from
     # one of its vertices (a graph-geodesic ball)
-    graph = bsfjax._mesh._mesh.edge_graph(mesh)
+    graph = bsfjax._mesh._graph.edge_graph(mesh)
     for row in F:
         idx = np.flatnonzero(row)
         d = scipy.sparse.csgraph.dijkstra(graph, directed=False, indices=idx)

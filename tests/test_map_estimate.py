@@ -1,4 +1,5 @@
-"""estimate_map (with landmarks, from several starts, the turn check) and mirror_symmetry."""
+"""MapEstimator and estimate_map (with landmarks, from several starts, the turn check) and
+mirror_symmetry."""
 
 from __future__ import annotations
 
@@ -6,9 +7,9 @@ import numpy as np
 import pytest
 
 import bsfjax
-from bsfjax import estimate_map
+from bsfjax import MapEstimator, estimate_map
 from bsfjax.internal import example_landmarks
-from bsfjax._maps._estimator import _measures_disagree
+from bsfjax._maps._turn import landmarks_from_map, measures_disagree, selection_rows
 from bsfjax.experiments._datasets import load_dataset
 from bsfjax.experiments.segmentation import shape_labels
 
@@ -57,7 +58,7 @@ def test_estimate_map_without_landmarks_uses_the_orientation_term(small_pair):
 def test_estimate_map_without_landmarks_keeps_the_best_start(small_pair):
     """Several starts: the result is the start that :func:`bsfjax.choose_map` picks from the
     single-start maps' distortion and orientation (an independent route), with those values;
-    the default starts are LANDMARK_FREE_STARTS up to ``refine_to``; bad starts are named."""
+    the default starts are ``landmark_free_starts`` up to ``refine_to``; bad starts are named."""
     pair, sm, sn = small_pair
     meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
     starts = ((10, 3.5), (20, 7.0), (30, 14.0), (12, 7.0))
@@ -139,9 +140,9 @@ def test_estimate_map_without_landmarks_reads_landmarks_off_its_map(small_pair):
 
 def test_estimate_map_turn_check_keeps_what_choose_map_prefers(small_pair):
     """The turn check keeps the map without it, or an alternative that ``choose_map`` prefers
-    to it by local distortion (at TURN_RADIUS on TURN_SAMPLES samples) and orientation; with
-    landmarks or one start it does not run; a non-bool is named."""
-    from bsfjax.internal import TURN_RADIUS, TURN_SAMPLES
+    to it by local distortion (at ``turn_radius`` on ``turn_samples`` samples) and orientation;
+    with landmarks or one start it does not run; a non-bool is named."""
+    fields = MapEstimator()
     pair, sm, sn = small_pair
     meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
     starts = ((10, 3.5), (20, 7.0))
@@ -154,15 +155,15 @@ def test_estimate_map_turn_check_keeps_what_choose_map_prefers(small_pair):
         assert est.distortion == without.distortion
     else:
         both = np.stack([without.p2p, est.p2p])
-        local = bsfjax.map_distortion(pair.source, pair.target, both, n_samples=TURN_SAMPLES,
-                                      radius=TURN_RADIUS)
+        local = bsfjax.map_distortion(pair.source, pair.target, both,
+                                      n_samples=fields.turn_samples, radius=fields.turn_radius)
         orient = bsfjax.orientation_agreement(pair.source, pair.target, both)
         assert bsfjax.choose_map(local, orient) == 1
     # the doubt: the two measures of the kept and the alternative map disagree (known here
     # only when the alternative was kept; otherwise a bool all the same)
     assert isinstance(est.turn_doubtful, bool) and without.turn_doubtful is None
     if est.swapped:
-        assert est.turn_doubtful == _measures_disagree(local, orient)
+        assert est.turn_doubtful == measures_disagree(fields, local, orient)
     one = estimate_map(sm, sn, k=20, refine_to=40, starts=((20, 7.0),), **meshes)
     assert one.swapped is None and one.turn_doubtful is None
 
@@ -170,29 +171,33 @@ def test_estimate_map_turn_check_keeps_what_choose_map_prefers(small_pair):
 def test_measures_disagree_closed_form():
     """The turn check is in doubt when, within the orientation slack, the map of least local
     distortion is not the map of best orientation; past the slack orientation alone decides."""
-    from bsfjax.internal import ORIENTATION_SLACK
-    assert not _measures_disagree([0.10, 0.20], [0.95, 0.90])  # both prefer map 0
-    assert not _measures_disagree([0.20, 0.10], [0.90, 0.95])  # both prefer map 1
-    assert _measures_disagree([0.161, 0.157], [0.905, 0.823])  # FAUST 020 -> FAUST_5k 001
-    assert _measures_disagree([0.10, 0.20], [0.90, 0.95])
-    assert not _measures_disagree([0.10, 0.20], [0.90, 0.90 + ORIENTATION_SLACK + 0.01])
-    assert not _measures_disagree([0.10, 0.10], [0.90, 0.90])  # ties: both keep map 0
+    est = MapEstimator()
+    slack = est.orientation_slack
+    assert not measures_disagree(est, [0.10, 0.20], [0.95, 0.90])  # both prefer map 0
+    assert not measures_disagree(est, [0.20, 0.10], [0.90, 0.95])  # both prefer map 1
+    assert measures_disagree(est, [0.161, 0.157], [0.905, 0.823])  # FAUST 020 -> FAUST_5k 001
+    assert measures_disagree(est, [0.10, 0.20], [0.90, 0.95])
+    assert not measures_disagree(est, [0.10, 0.20], [0.90, 0.90 + slack + 0.01])
+    assert not measures_disagree(est, [0.10, 0.10], [0.90, 0.90])  # ties: both keep map 0
+    # a wider slack: the same values are in doubt
+    assert measures_disagree(MapEstimator(orientation_slack=0.2), [0.10, 0.20],
+                             [0.90, 0.90 + slack + 0.01])
 
 
-def test_turn_check_keeps_the_map_of_a_target_too_coarse_for_it(small_pair, monkeypatch):
+def test_turn_check_keeps_the_map_of_a_target_too_coarse_for_it(small_pair):
     """No two target samples closer than the radius (here: a radius below every edge): no
     local distortion to compare, so the map without the check is kept, not an error."""
-    import bsfjax._maps._estimator as hl
     pair, sm, sn = small_pair
-    kw = dict(k=20, refine_to=40, starts=((10, 3.5), (20, 7.0)), source_mesh=pair.source,
-              target_mesh=pair.target)
-    without = estimate_map(sm, sn, turn_check=False, **kw)
-    monkeypatch.setattr(hl, "TURN_RADIUS", 1e-9)
-    est = estimate_map(sm, sn, **kw)
+    fields = dict(k=20, refine_to=40, starts=((10, 3.5), (20, 7.0)))
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    without = MapEstimator(turn_check=False, **fields)(sm, sn, **meshes)
+    est = MapEstimator(turn_radius=1e-9, **fields)(sm, sn, **meshes)
     assert est.swapped is False and est.turn_doubtful is None
     np.testing.assert_array_equal(est.p2p, without.p2p)
     with pytest.raises(ValueError, match="turn_check must be True or False"):
-        estimate_map(sm, sn, turn_check="yes", **kw)
+        estimate_map(sm, sn, turn_check="yes", **fields, **meshes)
+    with pytest.raises(ValueError, match="turn_radius must be a positive"):
+        MapEstimator(turn_radius=0.0)
 
 
 def test_turn_check_unturns_a_faust_pair():
@@ -227,7 +232,7 @@ def test_turn_check_says_when_its_measures_disagree():
     """FAUST 020 → the remeshed FAUST_5k 001 without landmarks: the turn check swaps a right
     map for a turned one (about a third right), by a local distortion 2 % lower against an
     orientation agreement 0.08 lower.  It cannot tell, and says so (docs/results.md, "The
-    turn check", stop 39)."""
+    turn check")."""
     seg = data_path("segmentations", "smpl_vert_segmentation.json")
     template, _ = bsfjax.load_labels(seg)
     src = bsfjax.load_mesh(data_path("faust", "tr_reg_020.off"))
@@ -241,13 +246,11 @@ def test_turn_check_says_when_its_measures_disagree():
     assert np.sum(mass * (template[est.p2p] == truth)) / mass.sum() < 0.4
 
 
-def test_mirror_symmetry_tries_every_start_when_one_keeps_the_orientation(monkeypatch):
+def test_mirror_symmetry_tries_every_start_when_one_keeps_the_orientation():
     """FAUST tr_reg_002: the single start's self-map falls part of the way to the identity
     (it keeps the orientation on about a third of the area, and maps most SMPL parts onto
     themselves).  Then every start is tried, and the one kept maps each part to its mirror
     part."""
-    import bsfjax._maps._estimator as me
-
     seg = data_path("segmentations", "smpl_vert_segmentation.json")
     mesh = bsfjax.load_mesh(data_path("faust", "tr_reg_002.off"))
     labels, names = bsfjax.load_labels(seg)
@@ -260,8 +263,9 @@ def test_mirror_symmetry_tries_every_start_when_one_keeps_the_orientation(monkey
     assert mirrored(sym) > 0.95 and bsfjax.orientation_agreement(mesh, mesh, sym) < 0.1
     rows = np.array([5, 3000, 5])
     np.testing.assert_array_equal(bsfjax.mirror_symmetry(spec, mesh, k=30, rows=rows), sym[rows])
-    monkeypatch.setattr(me, "ORIENTATION_SLACK", 1.0)  # the single start alone
-    one = bsfjax.mirror_symmetry(spec, mesh, k=30)
+    # the estimator's method with its defaults is the function's
+    np.testing.assert_array_equal(MapEstimator().mirror_symmetry(spec, mesh), sym)
+    one = MapEstimator(orientation_slack=1.0).mirror_symmetry(spec, mesh)  # the single start
     assert mirrored(one) < 0.5 and bsfjax.orientation_agreement(mesh, mesh, one) > 0.2
 
 
@@ -297,32 +301,30 @@ def test_mirror_symmetry_of_a_shape_with_one_mirror_plane():
                      source_symmetry=np.arange(5))
 
 
-def test_estimate_map_on_a_large_target_compares_its_candidates_on_part_of_it(small_pair,
-                                                                          monkeypatch):
-    """Above SELECTION_VERTICES the starts' maps are searched only at the corners of
-    SELECTION_FACES random faces and at the distortion samples: with every face that is the
+def test_estimate_map_on_a_large_target_compares_its_candidates_on_part_of_it(small_pair):
+    """Above ``selection_vertices`` the starts' maps are searched only at the corners of
+    ``selection_faces`` random faces and at the distortion samples: with every face that is the
     whole map again (the same result as the full comparison); with a quarter of the faces the
     same start is kept and its map is then searched over every vertex, and the landmarks read
     off a candidate are target vertices that were searched."""
-    import bsfjax._maps._estimator as me
     pair, sm, sn = small_pair
-    kw = dict(k=20, refine_to=40, starts=((10, 3.5), (20, 7.0), (30, 14.0)),
-              source_mesh=pair.source, target_mesh=pair.target)
-    full = estimate_map(sm, sn, **kw)
+    fields = dict(k=20, refine_to=40, starts=((10, 3.5), (20, 7.0), (30, 14.0)))
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
     quick = dict(derived_landmarks=0, turn_check=False)
-    full_quick = estimate_map(sm, sn, **quick, **kw)
-    monkeypatch.setattr(me, "SELECTION_VERTICES", 100)
-    monkeypatch.setattr(me, "SELECTION_FACES", 10 ** 9)  # every face, so every vertex
-    same = estimate_map(sm, sn, **kw)
+    full = MapEstimator(**fields)(sm, sn, **meshes)
+    full_quick = MapEstimator(**quick, **fields)(sm, sn, **meshes)
+    assert selection_rows(MapEstimator(), pair.target) == (None, None)  # a small target
+    every = dict(selection_vertices=100, selection_faces=10 ** 9)  # every face, every vertex
+    same = MapEstimator(**every, **fields)(sm, sn, **meshes)
     np.testing.assert_array_equal(same.p2p, full.p2p)
     assert same.start == full.start and same.orientation == pytest.approx(full.orientation)
-    monkeypatch.setattr(me, "SELECTION_FACES", pair.target.n_faces // 4)
-    rows, faces = me._selection_rows(pair.target)
+    some = dict(selection_vertices=100, selection_faces=pair.target.n_faces // 4)
+    rows, faces = selection_rows(MapEstimator(**some), pair.target)
     assert faces.size == pair.target.n_faces // 4 and rows.size < pair.target.n_vertices
-    part = estimate_map(sm, sn, **quick, **kw)
+    part = MapEstimator(**some, **quick, **fields)(sm, sn, **meshes)
     assert part.start == full_quick.start
     np.testing.assert_array_equal(part.p2p, full_quick.p2p)  # then searched everywhere
-    est = estimate_map(sm, sn, **kw)
+    est = MapEstimator(**some, **fields)(sm, sn, **meshes)
     gt, mass = np.asarray(pair.p2p), np.asarray(sn.mass)
     assert np.sum(mass * (pair.labels[est.p2p] == pair.labels[gt])) / mass.sum() > 0.95
     assert est.landmarks is not None  # (the derived estimate is kept on this pair)
@@ -332,15 +334,67 @@ def test_estimate_map_on_a_large_target_compares_its_candidates_on_part_of_it(sm
 def test_landmarks_read_off_a_map_skip_the_vertices_not_searched(small_pair):
     """``-1`` entries (target vertices not searched) are never read as landmarks: each source
     landmark takes the searched target vertex whose image is nearest to it."""
-    from bsfjax._maps._estimator import _landmarks_from_map
     pair, _, _ = small_pair
     gt = np.asarray(pair.p2p).astype(np.int64)
     part = gt.copy()
     hidden = np.arange(0, gt.size, 3)
     part[hidden] = -1
-    src, tgt = _landmarks_from_map(pair.source, part, 8)
+    src, tgt = landmarks_from_map(pair.source, part, 8)
     assert not np.isin(tgt, hidden).any() and (tgt >= 0).all()
     v = np.asarray(pair.source.vertices)
     known = np.flatnonzero(part >= 0)
     d = np.linalg.norm(v[part[known]][None] - v[src][:, None], axis=2)
     np.testing.assert_allclose(np.linalg.norm(v[part[tgt]] - v[src], axis=1), d.min(axis=1))
+
+
+def test_estimate_map_is_the_estimator_with_its_defaults(small_pair):
+    """``estimate_map``'s defaults are the [`MapEstimator`] fields, and it returns what the
+    estimator does; a field changed changes the map where it must (the single start's WKS
+    variance, ZoomOut's step, the orientation term's weight), and bad fields are named when
+    the estimator is made."""
+    import inspect
+    pair, sm, sn = small_pair
+    lm = example_landmarks(pair)
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    default = MapEstimator()
+    for fn, names in ((estimate_map, ("k", "refine_to", "n_energies", "zoomout_samples",
+                                      "zoomout_step", "starts", "derived_landmarks",
+                                      "turn_check")),
+                      (bsfjax.mirror_symmetry, ("k", "refine_to", "n_energies", "zoomout_step"))):
+        params = inspect.signature(fn).parameters
+        for name in names:
+            assert params[name].default == getattr(default, name), name
+    assert inspect.signature(bsfjax.mirror_symmetry).parameters["samples"].default == \
+        default.zoomout_samples
+    fields = MapEstimator(k=20, refine_to=40)
+    est = estimate_map(sm, sn, k=20, landmarks=(lm, lm), refine_to=40, **meshes)
+    same = fields(sm, sn, (lm, lm), **meshes)
+    for a, b in zip(est, same):
+        if a is not None and not isinstance(a, tuple):
+            np.testing.assert_array_equal(a, b)
+    starts = ((10, 3.5), (20, 7.0))
+    est = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, **meshes)
+    same = MapEstimator(k=20, refine_to=40, starts=starts)(sm, sn, **meshes)
+    np.testing.assert_array_equal(est.p2p, same.p2p)
+    assert (est.start, est.distortion, est.swapped) == (same.start, same.distortion, same.swapped)
+    # the single start's variance: the estimate from the start (k, 3.5)
+    wider = MapEstimator(k=20, refine_to=40, wks_variance=3.5)(sm, sn, (lm, lm), **meshes)
+    assert not np.array_equal(wider.C_initial, est.C_initial)
+    np.testing.assert_array_equal(
+        wider.C, estimate_map(sm, sn, k=20, refine_to=40, landmarks=(lm, lm),
+                              starts=((20, 3.5),)).C)
+    step = MapEstimator(k=20, refine_to=40, zoomout_step=1)(sm, sn, (lm, lm))
+    np.testing.assert_array_equal(
+        step.p2p, estimate_map(sm, sn, k=20, landmarks=(lm, lm), refine_to=40,
+                               zoomout_step=1).p2p)
+    one = dict(k=20, refine_to=40, starts=((20, 7.0),))
+    plain = MapEstimator(orient_weight=0.25, **one)(sm, sn, **meshes)
+    oriented = MapEstimator(**one)(sm, sn, **meshes)
+    assert not np.allclose(plain.C_initial, oriented.C_initial)
+    for bad, msg in ((dict(zoomout_step=0), "zoomout_step must be an integer >= 1"),
+                     (dict(orientation_slack=2.0), "orientation_slack must be in"),
+                     (dict(turn_landmarks=0), "turn_landmarks must be an integer"),
+                     (dict(wks_variance=-1.0), "wks_variance must be a positive"),
+                     (dict(orient_weight=0.0), "orient_weight must be a positive")):
+        with pytest.raises(ValueError, match=msg):
+            MapEstimator(**bad)

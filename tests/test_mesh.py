@@ -121,9 +121,9 @@ def _strict_off(path):
     """The line-by-line reader alone (the fast path switched off)."""
     from unittest import mock
 
-    import bsfjax._mesh._mesh as _mesh
-    with mock.patch.object(_mesh, "_read_plain_off", lambda raw: None):
-        return _mesh._read_off(path)
+    import bsfjax._mesh._readers as _readers
+    with mock.patch.object(_readers, "_read_plain_off", lambda raw: None):
+        return _readers._read_off(path)
 
 
 def _plain_off(v, f, newline="\n", fmt=repr):
@@ -134,7 +134,7 @@ def _plain_off(v, f, newline="\n", fmt=repr):
 @pytest.mark.parametrize("newline,fmt", [("\n", repr), ("\r\n", lambda x: f"{x:.6e}"),
                                          ("\n", lambda x: f"  {x:g}\t")])
 def test_plain_off_fast_path_equals_strict_reader(tmp_path, newline, fmt):
-    from bsfjax._mesh._mesh import _read_off, _read_plain_off
+    from bsfjax._mesh._readers import _read_off, _read_plain_off
 
     v, f = icosphere(2)
     v = v * np.random.default_rng(0).uniform(0.5, 2.0, v.shape)  # digits in every coordinate
@@ -157,7 +157,7 @@ def test_plain_off_fast_path_equals_strict_reader(tmp_path, newline, fmt):
     lambda t: t.replace("3 0 2 1", "3 0 2 1.5"),
 ])
 def test_other_off_layouts_take_the_strict_reader(tmp_path, edit):
-    from bsfjax._mesh._mesh import _read_plain_off
+    from bsfjax._mesh._readers import _read_plain_off
 
     text = edit(TET)
     assert _read_plain_off(text.encode()) is None

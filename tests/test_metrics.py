@@ -59,8 +59,8 @@ def test_zero_reference_rule_no_nan():
 
 @pytest.mark.parametrize("x64", [False, True], ids=["float32", "float64"])
 def test_tiny_reference_beside_a_large_estimate(x64):
-    """f = 1e-30 against f̃ = 1 is an error of 1e30 (its squares underflow in float32: until
-    stop 31 it came out 0.5); f = 1e-205 is zero in float32 (the absolute-error rule) and
+    """f = 1e-30 against f̃ = 1 is an error of 1e30 (its squares underflow in float32, which
+    would give 0.5); f = 1e-205 is zero in float32 (the absolute-error rule) and
     gives the exact 6.3e204 in float64; under jit the same."""
     a = np.array([1.0, 3.0])
     f = np.array([[1e-30, 0.0], [1.58e-205, 0.0], [1e-36, 0.0]])

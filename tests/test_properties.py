@@ -1,6 +1,6 @@
 """Property-based tests (hypothesis) of the public API on random valid meshes and functions.
 
-Invariants (issue 8, item 3):
+Invariants:
 
 * ``decode(encode(f))`` error never increases when the OMP sparsity S grows;
 * transferring a frame with the identity map onto the same shape reproduces it exactly, and so

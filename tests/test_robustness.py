@@ -1,5 +1,5 @@
 """Every bad input gets a clear error; every handled degenerate input gives a defined, NaN-free
-result (issue 8).  ``docs/robustness.md`` is the table of these cases; a test checks that it
+result.  ``docs/robustness.md`` is the table of these cases; a test checks that it
 lists every case id below.
 
 ``BAD_INPUTS``: (id, call, exception type, message regex).  Each call must raise that type (a
@@ -242,7 +242,7 @@ BAD_INPUTS = [
      r"spectra must be a non-empty sequence of bsfjax.Spectrum"),
     ("example-bad-levels", lambda s: bsfjax.example_mesh(levels=0), BSFError,
      r"levels must be an integer in \[1, 5\]"),
-    # --- round 2 (issue 18): one validation layer for every path
+    # --- one validation layer for every path
     ("labels-huge-id-indicators", lambda s: bsfjax.labels_to_indicators(
         np.r_[np.zeros(s.n - 1, int), 10**12]), BSFError,
      r"labels has max 1000000000000: .* GiB; compact the labels first"),
@@ -487,7 +487,7 @@ def test_mesh_report_counts(tmp_path):
 @pytest.mark.parametrize("target,call", [
     ("bsfjax._frame._build._build_core", lambda s: bsfjax.build_frame(s.spec, [99])),
     ("bsfjax._coding._encode._encode_batch", lambda s: bsfjax.encode(s.frame, s.F * np.nan)),
-    ("bsfjax._metrics._relative_error", lambda s: bsfjax.relative_error(s.F, s.F, -s.spec.mass)),
+    ("bsfjax._metrics._relative_error._relative_error", lambda s: bsfjax.relative_error(s.F, s.F, -s.spec.mass)),
     ("bsfjax._maps._fmap._fmap_to_p2p_jit", lambda s: bsfjax.fmap_to_p2p(np.eye(5) * np.inf, s.spec,
                                                                  s.spec)),
 ])
@@ -523,7 +523,7 @@ def test_cli_reports_bad_input_in_one_line(tmp_path, capsys, ns):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.txt", "s.off"]
 
 
-# --------------------------------------------------------------------------- CLI (issue 18)
+# --------------------------------------------------------------------------- CLI
 
 
 def _cli_files(tmp: Path, ns) -> dict:

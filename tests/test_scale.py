@@ -1,4 +1,4 @@
-"""Scale invariance of the whole pipeline (issue 18): a mesh in units of 1e-15 … 1e15 and
+"""Scale invariance of the whole pipeline: a mesh in units of 1e-15 … 1e15 and
 functions of magnitude 1e-15 … 1e15 give the relative errors of unit scale, in float32 and
 float64.  Magnitudes are rescaled on the host in float64 before any cast (unit-area spectra,
 unit-scale functions); the relative error is scale invariant, so it must not move.
@@ -104,8 +104,8 @@ def test_codes_and_metrics_scale(pair, x64):
 @pytest.mark.parametrize("landmarks", [True, False], ids=["landmarks", "orientation-term"])
 def test_shapes_in_different_units(pair, x64, landmarks):
     """A target in millimetres and a source in metres: the maps and labels of both in metres
-    (until stop 31 the pair kept its relative scale, and such a FAUST pair got 2 % of the SMPL
-    parts right).  ``C`` follows the target's units: ×s for a target ×s in length."""
+    (keeping the pair's relative scale would get 2 % of the SMPL parts of such a FAUST pair
+    right).  ``C`` follows the target's units: ×s for a target ×s in length."""
     ex, _ = pair
     labels = (ex.source.vertices[:, 0] > 0).astype(int) + 2 * (ex.source.vertices[:, 2] > 0)
     lm = ([0, 40, 80, 120], [0, 40, 80, 120]) if landmarks else None

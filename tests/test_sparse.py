@@ -1,4 +1,4 @@
-"""Issue 9: adaptive scales, frame hygiene, lasso with a target support, robust transfer, and
+"""Adaptive scales, frame hygiene, lasso with a target support, robust transfer, and
 the sparse-coding claims on FAUST (fixed seeds, small sizes)."""
 
 from __future__ import annotations
@@ -325,7 +325,7 @@ def faust_pair():
 
 
 def test_adaptive_sparse_codes_beat_the_projection_on_faust(faust_pair):
-    """Issue 9 at k = 30 (the benchmark's k = 50 numbers are in docs/results.md): with
+    """At k = 30 (the benchmark's k = 50 numbers are in docs/results.md): with
     taus="adaptive" and S = 30, approximation ≥ 20 % and GT-map transfer ≥ 15 % below the
     projection on k = 30 eigenfunctions; least squares ≥ 40 % below; the paper's scales with
     S = 30 do less well than the adaptive ones."""

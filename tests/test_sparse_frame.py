@@ -294,7 +294,7 @@ def test_list_builder_appends_in_chunks(monkeypatch):
 def test_products_in_overlapping_blocks(monkeypatch):
     """Blocks that do not divide n (the last one moved back over its predecessor): every row is
     counted once in B X, Bᵀ Y and nnz; integer data, so the sums are exact."""
-    import bsfjax._frame._sparse_frame as sf_mod
+    import bsfjax._frame._ell as ell_mod
 
     rng = np.random.default_rng(2)
     n, q, m = 61, 29, 3
@@ -303,11 +303,11 @@ def test_products_in_overlapping_blocks(monkeypatch):
     Y = rng.integers(-4, 5, size=(n, m)).astype(np.float32)
     width = lists.shape[1]
     for rows in (1, 7, 60, n):
-        monkeypatch.setattr(sf_mod, "_PRODUCT_ELEMS", rows * width * m)
+        monkeypatch.setattr(ell_mod, "_PRODUCT_ELEMS", rows * width * m)
         # new lambdas: retraced with the patched block size (jit caches by function)
-        matmul = jax.jit(lambda a, x: sf_mod.ell_matmul.__wrapped__(a, x))
-        rmatmul = jax.jit(lambda a, y: sf_mod.ell_rmatmul.__wrapped__(a, y, q))
-        counts = jax.jit(lambda a: sf_mod._block_counts.__wrapped__(a, q))
+        matmul = jax.jit(lambda a, x: ell_mod.ell_matmul.__wrapped__(a, x))
+        rmatmul = jax.jit(lambda a, y: ell_mod.ell_rmatmul.__wrapped__(a, y, q))
+        counts = jax.jit(lambda a: ell_mod._block_counts.__wrapped__(a, q))
         np.testing.assert_array_equal(np.asarray(matmul(jnp.asarray(lists), jnp.asarray(X))),
                                       B.astype(np.float32) @ X)
         np.testing.assert_array_equal(np.asarray(rmatmul(jnp.asarray(lists), jnp.asarray(Y))),
@@ -318,16 +318,16 @@ def test_products_in_overlapping_blocks(monkeypatch):
 def test_atom_vertices_is_the_scipy_transpose(monkeypatch):
     """The chunked counting-sort transpose equals scipy's CSC of B (indptr and sorted vertex
     indices), for one chunk, for chunks of a few rows, and with panels of 8 vertices."""
-    import bsfjax._frame._sparse_frame as sf_mod
+    import bsfjax._frame._ell as ell_mod
 
     rng = np.random.default_rng(3)
     n, q = 70, 37
     B, lists = _random_lists(rng, n, q, 0.2)
     ref = sp.csc_matrix(B)
     for elems, bits in ((2**23, 16), (3 * lists.shape[1], 16), (1, 16), (2 * lists.shape[1], 3)):
-        monkeypatch.setattr(sf_mod, "_HOST_CHUNK_ELEMS", elems)
-        monkeypatch.setattr(sf_mod, "_PANEL_BITS", bits)
-        av = sf_mod.atom_vertices(jnp.asarray(lists), q)
+        monkeypatch.setattr(ell_mod, "_HOST_CHUNK_ELEMS", elems)
+        monkeypatch.setattr(ell_mod, "_PANEL_BITS", bits)
+        av = ell_mod.atom_vertices(jnp.asarray(lists), q)
         assert av.lo.dtype == np.uint16 and av.starts.shape == (q, -(-n // 2**bits) + 1)
         np.testing.assert_array_equal(av.indptr, ref.indptr)
         got = [av.vertices(j) for j in range(q)]
@@ -339,7 +339,7 @@ def test_ell_gram_rows_equal_the_csr_product(monkeypatch):
     """Gram rows from the lists and their transpose equal scipy's ``(√w B)ᵀ (√w B)`` rows and
     column norms: bitwise (same products, same order) in one chunk; counts exactly and weighted
     rows to rounding when an atom's vertices are split over chunks."""
-    import bsfjax._frame._sparse_frame as sf_mod
+    import bsfjax._frame._ell as ell_mod
 
     rng = np.random.default_rng(4)
     n, q = 90, 33
@@ -348,20 +348,20 @@ def test_ell_gram_rows_equal_the_csr_product(monkeypatch):
     sw = np.sqrt(w)
     Bw = sp.csr_matrix(B * sw[:, None])
     ks = np.array([0, 3, 7, 7, q - 1])  # an empty atom, a repeated one
-    monkeypatch.setattr(sf_mod, "_PANEL_BITS", 4)  # several panels
-    av = sf_mod.atom_vertices(lists, q)
+    monkeypatch.setattr(ell_mod, "_PANEL_BITS", 4)  # several panels
+    av = ell_mod.atom_vertices(lists, q)
     ref_counts = (sp.csr_matrix(B.astype(float)).T[ks] @ sp.csr_matrix(B.astype(float))).toarray()
     ref_w = (Bw.T.tocsr()[ks] @ Bw).toarray()
     for elems, exact in ((2**23, True), (2 * lists.shape[1], False)):
-        monkeypatch.setattr(sf_mod, "_HOST_CHUNK_ELEMS", elems)
-        np.testing.assert_array_equal(sf_mod.ell_gram_rows(lists, av, ks), ref_counts)
-        got = sf_mod.ell_gram_rows(lists, av, ks, sw * sw)
+        monkeypatch.setattr(ell_mod, "_HOST_CHUNK_ELEMS", elems)
+        np.testing.assert_array_equal(ell_mod.ell_gram_rows(lists, av, ks), ref_counts)
+        got = ell_mod.ell_gram_rows(lists, av, ks, sw * sw)
         if exact:
             np.testing.assert_array_equal(got, ref_w)
         else:
             np.testing.assert_allclose(got, ref_w, rtol=1e-14)
         # column norms are summed per whole atom, so chunking never changes them
-        np.testing.assert_array_equal(sf_mod.atom_sums(av, sw * sw),
+        np.testing.assert_array_equal(ell_mod.atom_sums(av, sw * sw),
                                       np.asarray(Bw.multiply(Bw).sum(axis=0)).ravel())
 
 
@@ -404,6 +404,7 @@ def test_packed_lists_beyond_16_bits(monkeypatch):
     """q ≥ 2¹⁶: 16-bit lists with per-vertex segment starts (bsfjax._frame._packed_lists) give the
     int32 lists' products, counts, transpose, Gram rows, columns and pull-back; the builder
     packs them as the atoms arrive (blocks straddling 2¹⁶ and 2·2¹⁶)."""
+    import bsfjax._frame._ell as ell_mod
     import bsfjax._frame._sparse_frame as sf_mod
     from bsfjax.internal import decode_host, decode_traced, pack_lists
 
@@ -446,12 +447,12 @@ def test_packed_lists_beyond_16_bits(monkeypatch):
     np.testing.assert_array_equal(packed.host_lists(), lists)
     np.testing.assert_array_equal(packed.to_scipy().toarray(), B)
     np.testing.assert_array_equal(packed.atom_columns(active[:5]), B[:, active[:5]])
-    av, av_ref = (sf_mod.atom_vertices(f.atom_lists, q, f.atom_segments) for f in (packed, plain))
+    av, av_ref = (ell_mod.atom_vertices(f.atom_lists, q, f.atom_segments) for f in (packed, plain))
     for x, y in zip(av, av_ref):
         np.testing.assert_array_equal(x, y)
     ks = active[[0, 2, 3, -1]]
-    np.testing.assert_array_equal(sf_mod.ell_gram_rows(lo, av, ks, segments=seg),
-                                  sf_mod.ell_gram_rows(lists, av_ref, ks))
+    np.testing.assert_array_equal(ell_mod.ell_gram_rows(lo, av, ks, segments=seg),
+                                  ell_mod.ell_gram_rows(lists, av_ref, ks))
     p2p = rng.integers(0, n, n)
     np.testing.assert_array_equal(packed.pull_back(p2p, kw["coeffs"], kw["mass"]).host_lists(),
                                   lists[p2p])

@@ -196,7 +196,7 @@ def test_frames_beyond_the_dense_budget_run_eagerly_on_list_frames(pairs, monkey
 
     monkeypatch.setattr(frame_mod, "DENSE_BUDGET_BYTES", 1024)
     monkeypatch.setattr(transfer_mod, "DENSE_BUDGET_BYTES", 1024)
-    monkeypatch.setattr("bsfjax._transfer._methods.transfer_frame", spy)
+    monkeypatch.setattr("bsfjax._transfer._bsf.transfer_frame", spy)
     listed = bsfjax.transfer("omp", p, F[0], sparsity=6)
     assert kinds == ["SparseFrame"]
     np.testing.assert_array_equal(np.asarray(listed.codes) != 0, np.asarray(dense.codes) != 0)

@@ -85,7 +85,7 @@ def run_demo(out_dir: str | Path | None = "bsfjax-demo", *, levels: int = 3, k: 
     from .._frame import build_frame
     from .._sampling import geodesic_error
     from .._pipeline import transfer_labels
-    from .._maps import estimate_map
+    from .._maps import MapEstimator
     from .._metrics import random_indicators
     from .._metrics import relative_error
     from .._maps import REFINE_EIGENPAIRS
@@ -114,8 +114,8 @@ def run_demo(out_dir: str | Path | None = "bsfjax-demo", *, levels: int = 3, k: 
     gt = np.asarray(pair.p2p)
     C_gt = timer("ground-truth map", fmap_from_p2p, sm.truncate(k), sn.truncate(k), gt)
     lm = example_landmarks(pair)
-    est = timer("map estimation (WKS + landmarks, ZoomOut)", estimate_map, sm, sn, k=k,
-                landmarks=(lm, lm), refine_to=k_refine, source_mesh=src, target_mesh=tgt)
+    est = timer("map estimation (WKS + landmarks, ZoomOut)", MapEstimator(k=k, refine_to=k_refine),
+                sm, sn, (lm, lm), source_mesh=src, target_mesh=tgt)
     map_error = {"estimated": float(geodesic_error(src, np.asarray(fmap_to_p2p(est.C_initial, sm,
                                                                                 sn)), gt)),
                  "refined": float(geodesic_error(src, est.p2p, gt))}

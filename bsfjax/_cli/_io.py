@@ -142,11 +142,16 @@ def coloured_data(result, labels: bool) -> dict:
     return data
 
 
-def one_start(args, k: int):
-    """``estimate_map``'s ``starts`` for ``--one-start`` (``None``: its default)."""
-    from .._maps import WKS_VARIANCE
+def map_estimator(args, k: int, refine_to: int | None = None):
+    """The [`MapEstimator`][bsfjax.MapEstimator] of ``bsfjax transfer``: at ``k`` (ZoomOut to
+    ``refine_to``), its single start ``(k, wks_variance)`` with ``--one-start``, else its
+    default starts."""
+    from .._maps import MapEstimator
 
-    return ((k, WKS_VARIANCE),) if args.one_start else None
+    default = MapEstimator(k=k, refine_to=refine_to)
+    if not args.one_start:
+        return default
+    return MapEstimator(k=k, refine_to=refine_to, starts=((k, default.wks_variance),))
 
 
 #: Said when [`bsfjax.estimate_map`][bsfjax.estimate_map]'s turn check could not tell which of its two maps is

@@ -13,6 +13,13 @@ from ._parser import _check_options, _join_option_values, build_parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the `bsfjax` command with the arguments `argv` (default: `sys.argv[1:]`).
+
+    **Returns:**
+
+    The exit status: 0 on success, 2 for bad input, 130 after Ctrl-C.  In the `bsfjax`
+    command's own process it exits with that status instead of returning.
+    """
     from .._util import exit_now, install_sigint_handler
 
     if not install_sigint_handler():  # Ctrl-C: one line, exit 130, temporaries removed
@@ -36,7 +43,7 @@ def _use_compilation_cache() -> None:
     Every program is kept, however fast it compiled: JAX keeps by default only those that took
     a second or more, and most of ours take 0.05–1 s each, so a second ``bsfjax transfer`` of a
     5.5K-vertex target took 6.4 s instead of 4.1 s (one entry kept instead of 50, 0.46 MB in
-    all; stop 29).  ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` still overrides it."""
+    all).  ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` still overrides it."""
     import os
 
     import jax

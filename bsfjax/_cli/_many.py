@@ -149,7 +149,7 @@ def cmd_transfer_many(args, error) -> int:
     landmarks = _read_landmarks_file(args.landmarks_file, targets, error)
     source = load_mesh(args.source)
     from ._io import read_values
-    from ._io import TURN_DOUBT, one_start
+    from ._io import TURN_DOUBT, map_estimator
 
     values, part_names, per_face = read_values(args, source)
     # .json labels come back as .json, triangles' labels as .seg
@@ -176,7 +176,7 @@ def cmd_transfer_many(args, error) -> int:
         method=args.method, k=args.k,
         landmarks=lambda j: landmarks.get(todo[j]), threshold=args.threshold,
         errors="report", spectrum_cache=args.spectrum_cache,
-        batch=1 if args.batch is None else args.batch, starts=one_start(args, args.k))
+        batch=1 if args.batch is None else args.batch, estimator=map_estimator(args, args.k))
     mine = len(process_share(range(len(todo))))
     bar = tqdm(total=mine, desc="targets", unit="target", disable=args.no_progress,
                file=sys.stderr)

@@ -6,7 +6,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from ._io import (TURN_DOUBT, CLIError, _read_array, _write_array, coloured_data, is_json, one_start,
+from ._io import (TURN_DOUBT, CLIError, _read_array, _write_array, coloured_data, is_json, map_estimator,
                   read_truth, read_values)
 from .._mesh import is_face_file
 
@@ -54,7 +54,6 @@ def _transfer_one(args) -> int:
     import numpy as np
 
     from .._pipeline import transfer_labels, transfer_values
-    from .._maps import estimate_map
     from .._mesh import load_mesh
     from .._mesh import save_mesh
     from .._spectral import spectrum
@@ -128,9 +127,8 @@ def _transfer_one(args) -> int:
                           "mirror image or turned front to back (an orientation term and a choice "
                           "among several starts make it less likely; two landmark pairs remove "
                           "it)", stacklevel=1)
-        est = estimate_map(sm.truncate(k_map), sn.truncate(k_map), k=k, landmarks=landmarks,
-                           refine_to=k_map, source_mesh=source, target_mesh=target,
-                           starts=one_start(args, k))
+        est = map_estimator(args, k, k_map)(sm.truncate(k_map), sn.truncate(k_map), landmarks,
+                                            source_mesh=source, target_mesh=target)
         C, p2p = est.C, est.p2p
         print(f"estimated a {k}x{k} map (ZoomOut to {k_map})", file=sys.stderr)
         if est.start is not None:
@@ -144,12 +142,11 @@ def _transfer_one(args) -> int:
                 warnings.warn(TURN_DOUBT, stacklevel=1)
     common = dict(C=C, p2p=p2p, method=args.method, mesh=source)
     if args.method == "refined":  # its continuation runs on the samples of the map's ZoomOut
-        from .._maps import ZOOMOUT_SAMPLES
         from .._sampling import subsample
 
+        n_samples = map_estimator(args, k).zoomout_samples
         common["samples"] = (est.samples if kind == "estimate" else
-                             (subsample(source, ZOOMOUT_SAMPLES),
-                              subsample(target, ZOOMOUT_SAMPLES)))
+                             (subsample(source, n_samples), subsample(target, n_samples)))
     if args.labels and per_face:
         from .._pipeline import transfer_face_labels
 

@@ -13,7 +13,7 @@ when it is made ([`BSFError`][bsfjax.BSFError] on a bad value).  Every coder has
 - ``"area"`` (default): the codes minimise ``‖f − Bα‖_A`` with the frame's vertex areas
   ``A = frame.mass`` — the norm of the paper's metrics.  A plain ``(n, q)`` atom array has no
   areas, so there ``"area"`` means unit weights (the Euclidean norm).
-- ``None``: the Euclidean norm ``‖f − Bα‖₂`` (as SPAMS and scikit-learn).
+- `None`: the Euclidean norm ``‖f − Bα‖₂`` (as SPAMS and scikit-learn).
 - an ``(n,)`` array ``w ≥ 0``: ``‖f − Bα‖²_W = Σ_v w_v (f − Bα)_v²``.
 """
 
@@ -37,15 +37,16 @@ __all__ = ["AbstractCoder", "CodingInfo"]
 class CodingInfo(NamedTuple):
     """Per-function diagnostics of [`encode`][bsfjax.encode] (``return_info=True``); a pytree.
 
-    Attributes:
-        n_atoms: ``(...,)`` int32 number of nonzero coefficients (atoms used).
-        residual: ``(...,)`` residual norm ``‖f − Bα‖_W`` in the coder's ``weights``.
-        converged: ``(...,)`` bool.  ``OMP``: ``S`` atoms were selected, or the residual
-            became orthogonal to every atom (nothing left to fit); false when OMP stopped
-            early because the next atom was linearly dependent on the selected ones.
-            ``ErrorOMP``: the bound ``‖f − Bα‖² ≤ ε`` was met.  ``Lasso``: the last
-            FISTA step met ``tol`` within ``maxiter`` iterations.  ``LeastSquares``: always
-            true.
+    **Attributes:**
+
+    - `n_atoms`: ``(...,)`` int32 number of nonzero coefficients (atoms used).
+    - `residual`: ``(...,)`` residual norm ``‖f − Bα‖_W`` in the coder's ``weights``.
+    - `converged`: ``(...,)`` bool.  ``OMP``: ``S`` atoms were selected, or the residual
+      became orthogonal to every atom (nothing left to fit); false when OMP stopped
+      early because the next atom was linearly dependent on the selected ones.
+      ``ErrorOMP``: the bound ``‖f − Bα‖² ≤ ε`` was met.  ``Lasso``: the last
+      FISTA step met ``tol`` within ``maxiter`` iterations.  ``LeastSquares``: always
+      true.
     """
 
     n_atoms: jax.Array
@@ -93,7 +94,7 @@ class AbstractCoder(eqx.Module):
 
     weights: Any = "area"
 
-    #: The name of this coder in [`bsfjax.CODERS`][bsfjax.CODERS].
+    #: The name of this coder in `CODERS`.
     name: ClassVar[str] = ""
 
     def __check_init__(self):

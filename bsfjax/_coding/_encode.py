@@ -1,5 +1,5 @@
 r"""Sparse coding of functions in a Binary Sparse Frame (paper Sec. 5): [`encode`][bsfjax.encode],
-[`decode`][bsfjax.decode], the coder registry [`CODERS`][bsfjax.CODERS] and [`as_coder`][bsfjax.as_coder].
+[`decode`][bsfjax.decode], the coder registry `CODERS` and `as_coder`.
 
 Owner of: input validation (one path for every kind of frame and coder), the conversion of the
 functions to a flat ``(m, n)`` batch, the host Gram-row registration of a call, the device
@@ -42,11 +42,11 @@ __all__ = ["CodingInfo", "encode", "decode", "CODERS", "as_coder"]
 #: The coders by name: the one registry of the string shorthands of [`encode`][bsfjax.encode].
 CODERS: dict[str, type[AbstractCoder]] = {"lstsq": LeastSquares, "omp": OMP,
                                           "omp_error": ErrorOMP, "lasso": Lasso}
-#: The names of [`CODERS`][bsfjax.CODERS].
+#: The names of `CODERS`.
 
 
 def as_coder(coder: str | AbstractCoder = "omp", **options) -> AbstractCoder:
-    """A coder object from a name of [`CODERS`][bsfjax.CODERS] and its options, or the coder itself.
+    """A coder object from a name of `CODERS` and its options, or the coder itself.
 
     ``as_coder("omp", sparsity=20) == OMP(sparsity=20)``.  Options are only accepted with a
     name (a coder object already holds its options).
@@ -179,7 +179,7 @@ def encode(frame: AbstractFrame | Float[Array, "n q"], f: Float[Array, "*batch n
     r"""Sparse (or least-squares) coefficients of functions ``f`` in a frame: ``f ≈ Bα``.
 
     ``encode(frame, f, "omp", sparsity=20)`` is ``encode(frame, f, OMP(sparsity=20))``: a
-    name of [`CODERS`][bsfjax.CODERS] with its options, or a coder object (then no options).
+    name of `CODERS` with its options, or a coder object (then no options).
 
     **Arguments:**
 
@@ -309,7 +309,7 @@ class _Entry:
 def _run_batch(entry: _Entry, replicated, per_function, m: int):
     """Run ``entry``; with several JAX devices (and at least one function per device, outside
     any trace) the functions are split evenly over them
-    (`bsfjax._devices.map_over_devices`); each device codes its functions with the same
+    (`bsfjax._util.map_over_devices`); each device codes its functions with the same
     kernel, so the result is the single-device one."""
     d = n_devices()
     if d > 1 and m >= d and not is_traced(per_function[0]):

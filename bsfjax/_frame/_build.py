@@ -98,16 +98,18 @@ def build_frame(spectrum: Spectrum, centers: Int[ArrayLike, " c"],
             [`Frame`][bsfjax.Frame]; ``None`` (default): sparse when the dense atoms would exceed
             `DENSE_BUDGET_BYTES` (2 GiB), e.g. ~48K vertices at 5 % × 3 scales.
 
-    Returns:
-        A [`Frame`][bsfjax.Frame] (or [`SparseFrame`][bsfjax.SparseFrame], same atoms) with
-        ``q = S · n_centers`` columns: atoms ``(n, q)`` and coeffs
-        ``(k, q)`` in JAX's default float dtype, ``taus``/``gammas``/``centers`` per column as
-        given, ``mass = spectrum.mass`` and the ``tau_convention``.
+    **Returns:**
 
-    Raises:
-        BSFError: non-positive or non-finite τ, γ outside (0, 1) or the wrong number of γ,
-            empty / non-integer / out-of-range centres, an unknown convention, or a malformed
-            spectrum — always before anything is traced.
+    A [`Frame`][bsfjax.Frame] (or [`SparseFrame`][bsfjax.SparseFrame], same atoms) with
+    ``q = S · n_centers`` columns: atoms ``(n, q)`` and coeffs
+    ``(k, q)`` in JAX's default float dtype, ``taus``/``gammas``/``centers`` per column as
+    given, ``mass = spectrum.mass`` and the ``tau_convention``.
+
+    **Raises:**
+
+    - `BSFError`: non-positive or non-finite τ, γ outside (0, 1) or the wrong number of γ,
+      empty / non-integer / out-of-range centres, an unknown convention, or a malformed
+      spectrum — always before anything is traced.
     """
     _check_spectrum(spectrum, "spectrum")
     if tau_convention not in TAU_CONVENTIONS:
@@ -189,10 +191,11 @@ def transfer_frame(frame: AbstractFrame, C: Float[ArrayLike, "kN kM"],
         sparse: ``None`` (default): the kind of ``frame`` (a [`SparseFrame`][bsfjax.SparseFrame] gives
             a sparse result, built in vertex blocks); ``True``/``False`` to choose.
 
-    Returns:
-        A frame of the same kind (or as ``sparse`` says) on ``N``: atoms ``(n_N, q)``, coeffs ``a_N`` ``(k_N, q)``,
-        ``mass = target_spectrum.mass``; ``taus``, ``gammas``, ``tau_convention`` and
-        ``centers`` are the source's — ``centers`` still index vertices of ``M``.
+    **Returns:**
+
+    A frame of the same kind (or as ``sparse`` says) on ``N``: atoms ``(n_N, q)``, coeffs ``a_N`` ``(k_N, q)``,
+    ``mass = target_spectrum.mass``; ``taus``, ``gammas``, ``tau_convention`` and
+    ``centers`` are the source's — ``centers`` still index vertices of ``M``.
     """
     if not isinstance(frame, AbstractFrame):
         raise BSFError(f"frame must be a bsfjax.Frame or SparseFrame, got {type(frame).__name__}")

@@ -33,25 +33,26 @@ class Frame(AbstractFrame):
     Column order: scale-major — column ``s * n_centers + c`` is the atom of scale ``taus[s]``
     centred at ``centers[c]``; ``Frame.taus`` and ``Frame.centers`` give both per column.
 
-    Attributes:
-        atoms: ``(n, q)`` binary matrix B (0/1 in the float dtype), one atom per column.
-        coeffs: ``(k, q)`` spectral coefficients ĝ ⊙ Φ[x, :] of the Gaussian behind each atom
-            (the quantity a functional map transports, paper Eq. 11), with ĝ in the frame's
-            ``tau_convention``.
-        taus: ``(q,)`` diffusion scale τ of each column (as given by the caller).
-        centers: ``(q,)`` int vertex index of each column's centre.  After
-            [`transfer_frame`][bsfjax.transfer_frame] these still index the *source* shape's vertices.
-        mass: ``(n,)`` vertex areas of the shape (for area-weighted coding and metrics), or
-            ``None`` (a plain atom array given to [`bsfjax.encode`][bsfjax.encode]: unit weights).
-        gammas: ``(q,)`` threshold γ of each column (reused by [`transfer_frame`][bsfjax.transfer_frame]), or
-            ``None`` for a hand-made frame.
-        tau_convention: how ``taus`` enter ĝ (static): ``"unit_area"`` means
-            ĝ_l = exp(−τ · area · (λ_l − λ_1)) with area = Σ mass; ``"raw"`` means
-            ĝ_l = exp(−τ (λ_l − λ_1)).  `effective_taus` gives the τ applied to the raw
-            eigenvalues in either case.
-        columns: ``(q,)`` int index of each column in the frame as [`build_frame`][bsfjax.build_frame] made
-            it, after [`prune_frame`][bsfjax.prune_frame] dropped duplicate or empty atoms; ``None`` for a
-            frame that was never pruned (column ``j`` is built column ``j``).
+    **Attributes:**
+
+    - `atoms`: ``(n, q)`` binary matrix B (0/1 in the float dtype), one atom per column.
+    - `coeffs`: ``(k, q)`` spectral coefficients ĝ ⊙ Φ[x, :] of the Gaussian behind each atom
+      (the quantity a functional map transports, paper Eq. 11), with ĝ in the frame's
+      ``tau_convention``.
+    - `taus`: ``(q,)`` diffusion scale τ of each column (as given by the caller).
+    - `centers`: ``(q,)`` int vertex index of each column's centre.  After
+      [`transfer_frame`][bsfjax.transfer_frame] these still index the *source* shape's vertices.
+    - `mass`: ``(n,)`` vertex areas of the shape (for area-weighted coding and metrics), or
+      ``None`` (a plain atom array given to [`bsfjax.encode`][bsfjax.encode]: unit weights).
+    - `gammas`: ``(q,)`` threshold γ of each column (reused by [`transfer_frame`][bsfjax.transfer_frame]), or
+      ``None`` for a hand-made frame.
+    - `tau_convention`: how ``taus`` enter ĝ (static): ``"unit_area"`` means
+      ĝ_l = exp(−τ · area · (λ_l − λ_1)) with area = Σ mass; ``"raw"`` means
+      ĝ_l = exp(−τ (λ_l − λ_1)).  `effective_taus` gives the τ applied to the raw
+      eigenvalues in either case.
+    - `columns`: ``(q,)`` int index of each column in the frame as [`build_frame`][bsfjax.build_frame] made
+      it, after [`prune_frame`][bsfjax.prune_frame] dropped duplicate or empty atoms; ``None`` for a
+      frame that was never pruned (column ``j`` is built column ``j``).
     """
 
     atoms: Float[Array, "n q"]

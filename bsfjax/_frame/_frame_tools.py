@@ -1,6 +1,6 @@
 r"""Frame hygiene and scale selection: adaptive τ, distinct atoms, pruning.
 
-Owner of: [`adaptive_taus`][bsfjax.adaptive_taus], [`unique_atoms`][bsfjax.unique_atoms], [`prune_frame`][bsfjax.prune_frame], and the input
+Owner of: [`adaptive_taus`][bsfjax.adaptive_taus], `unique_atoms`, [`prune_frame`][bsfjax.prune_frame], and the input
 checks shared with [`bsfjax.build_frame`][bsfjax.build_frame] / [`bsfjax.transfer_frame`][bsfjax.transfer_frame].  Everything
 here works on any [`AbstractFrame`][bsfjax.AbstractFrame] (dense or sparse) through its interface.
 
@@ -10,7 +10,7 @@ fixed τ ∈ {0.001, 0.005, 0.01} give atoms whose size is set by the band limit
 The adaptive choice measures the mean area share of the atoms as a function of τ on the
 spectrum itself and picks a geometric series of shares from 1 % to 20 % of the surface.
 
-Hygiene ([`unique_atoms`][bsfjax.unique_atoms], [`prune_frame`][bsfjax.prune_frame]).  Binarization can make two columns
+Hygiene (`unique_atoms`, [`prune_frame`][bsfjax.prune_frame]).  Binarization can make two columns
 identical (two scales at one centre, or neighbouring centres) or empty (a kernel that vanished
 after transfer); such columns are masked or dropped, and ``frame.columns`` records which of the
 built columns remain.
@@ -66,7 +66,7 @@ def _adaptive_core(evals, evecs, mass, probes, gamma, lo, hi, n_scales: int, uni
     return jnp.exp(jnp.interp(jnp.log(targets), xs, jnp.log(grid)))
 
 
-#: Fixed random rows of the support hashes of [`unique_atoms`][bsfjax.unique_atoms] (two 32-bit hashes).
+#: Fixed random rows of the support hashes of `unique_atoms` (two 32-bit hashes).
 _HASH_SEED = 0x5EED
 
 
@@ -193,9 +193,10 @@ def adaptive_taus(spectrum: Spectrum, centers: Int[ArrayLike, " c"], *,
         gamma: the threshold the frame will use.
         tau_convention: the convention of the returned τ (see [`build_frame`][bsfjax.build_frame]).
 
-    Returns:
-        ``(n_scales,)`` non-decreasing τ (equal τ where the shares saturate; the duplicate
-        atoms they give are what [`prune_frame`][bsfjax.prune_frame] removes).
+    **Returns:**
+
+    ``(n_scales,)`` non-decreasing τ (equal τ where the shares saturate; the duplicate
+    atoms they give are what [`prune_frame`][bsfjax.prune_frame] removes).
     """
     _check_spectrum(spectrum, "spectrum")
     if tau_convention not in TAU_CONVENTIONS:
@@ -234,11 +235,12 @@ def unique_atoms(frame: AbstractFrame | Float[ArrayLike, "n q"]
         frame: a [`Frame`][bsfjax.Frame], a [`SparseFrame`][bsfjax.SparseFrame] or an ``(n, q)``
             atom array.
 
-    Returns:
-        ``(keep, representative)``: ``keep`` ``(q,)`` bool, true for the first column of every
-        distinct non-empty support; ``representative`` ``(q,)`` int32, the kept column equal to
-        each column (itself when kept), ``-1`` for empty columns.  Masking, ``B * keep``, gives
-        a frame with the same span in which no two non-zero columns are equal.
+    **Returns:**
+
+    ``(keep, representative)``: ``keep`` ``(q,)`` bool, true for the first column of every
+    distinct non-empty support; ``representative`` ``(q,)`` int32, the kept column equal to
+    each column (itself when kept), ``-1`` for empty columns.  Masking, ``B * keep``, gives
+    a frame with the same span in which no two non-zero columns are equal.
     """
     if not isinstance(frame, AbstractFrame):
         atoms = frame if hasattr(frame, "ndim") else np.asarray(frame)
@@ -263,10 +265,11 @@ def prune_frame(frame: AbstractFrame, alpha: Float[ArrayLike, "*batch q"] | None
     ``decode(pruned, α') == decode(frame, α)`` (up to rounding).
 
     Concrete inputs only (the column count of the result depends on the values); under
-    ``jit`` mask with [`unique_atoms`][bsfjax.unique_atoms] instead.
+    ``jit`` mask with `unique_atoms` instead.
 
-    Returns:
-        The pruned [`Frame`][bsfjax.Frame], or ``(frame, alpha_merged)`` when ``alpha`` is given.
+    **Returns:**
+
+    The pruned [`Frame`][bsfjax.Frame], or ``(frame, alpha_merged)`` when ``alpha`` is given.
     """
     if not isinstance(frame, AbstractFrame):
         raise BSFError(f"frame must be a bsfjax.Frame or SparseFrame, got "

@@ -139,7 +139,7 @@ class AbstractFrame(eqx.Module):
     @abc.abstractmethod
     def support_hashes(self, r: Int[Array, "h n"]) -> Int[Array, "h q"]:
         """``Σ_v [B_vj ≠ 0] r_hv mod 2³²`` per column and hash row (uint32), and nothing else
-        about the values: equal supports hash equally ([`bsfjax.unique_atoms`][bsfjax.unique_atoms])."""
+        about the values: equal supports hash equally (`unique_atoms`)."""
 
     @abc.abstractmethod
     def nonempty(self) -> "jax.Array":

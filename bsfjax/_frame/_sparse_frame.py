@@ -1,6 +1,8 @@
 r"""Sparse Binary Sparse Frames: the atoms as per-vertex atom lists, O(nnz) memory.
 
-Owner of: ``SparseFrame`` and the sparse products of a frame (``B x``, ``Bᵀ y``, ``BᵀWB``).
+Owner of: ``SparseFrame``, the build of its atom lists (`sparse_atom_lists`, `_ListBuilder`)
+and `sparse_gram` (``BᵀWB``); the kernels of the products (``B x``, ``Bᵀ y``, Gram rows) live
+in `bsfjax._frame._ell`, the host Gram sources in `bsfjax._frame._sparse_gram`.
 
 A dense frame stores ``B`` ``(n, q)``; at 111K vertices and q = 16.7K atoms that is 7.4 GB in
 float32 although only ~2 % of the entries are 1.  A [`SparseFrame`][bsfjax.SparseFrame] stores, for every
@@ -9,7 +11,7 @@ vertex ``v``, the sorted list of atoms that contain it, padded with ``q`` to a c
 
     atom_lists[v, d] = j_d(v)  (j_1 < j_2 < … , then q … q)       B_vj = 1  ⇔  j ∈ atom_lists[v]
 
-stored in 16 bits (`bsfjax._packed_lists`: the low bits, plus per vertex where each
+stored in 16 bits (`bsfjax._frame._packed_lists`: the low bits, plus per vertex where each
 ``2¹⁶`` block of atom indices starts when ``q ≥ 2¹⁶``), half the memory of int32.
 
 On real meshes ``D`` is close to the mean row count (each vertex is covered by about the same
@@ -32,9 +34,6 @@ in place (no padded copy).
 
 from __future__ import annotations
 
-from functools import partial
-from typing import NamedTuple
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -45,19 +44,18 @@ from jaxtyping import Array, Float, Int
 
 from . import _operator
 from ._binarize import mask_block
+from ._ell import _block_counts, atom_vertices, ell_matmul, ell_rmatmul
 from .._util import BSFError
 from ._gram_rows import host_callback_dtype, join64, split64
 from .._util import release_free_memory
 from ._packed_lists import SEGMENT_BITS, decode_host, decode_traced, n_segments, pack_lists
 from ._operator import AbstractFrame
+from ._sparse_gram import EllGramSource, _lists_to_scipy
 
-__all__ = ["SparseFrame", "sparse_atoms", "sparse_atom_lists", "ell_matmul", "ell_rmatmul",
-           "sparse_gram", "AtomVertices", "atom_vertices", "atom_sums", "ell_gram_rows"]
+__all__ = ["SparseFrame", "sparse_atoms", "sparse_atom_lists", "sparse_gram"]
 
 #: Kernel values per column block of the build (``n × block`` live at a time).
 _BUILD_ELEMS = 2**24
-#: Elements (``rows × D × m``) gathered or scattered per block of a product.
-_PRODUCT_ELEMS = 2**22
 
 
 class SparseFrame(AbstractFrame):
@@ -65,14 +63,15 @@ class SparseFrame(AbstractFrame):
 
     Same fields and column order as [`bsfjax.Frame`][bsfjax.Frame] except ``atoms``:
 
-    Attributes:
-        atom_lists: ``(n, D)``, the atoms containing each vertex in increasing order, padded
-            with ``q``: uint16 as built, their low 16 bits when ``atom_segments`` is given
-            (`bsfjax._packed_lists`); any integer dtype for hand-made lists.
-        coeffs: ``(k, q)`` spectral coefficients of each atom's kernel.
-        taus, centers, mass, gammas, tau_convention, columns: as in [`bsfjax.Frame`][bsfjax.Frame].
-        atom_segments: ``(n, S)`` int32, ``S = q >> 16``, or ``None`` (``q < 2¹⁶`` or plain
-            lists): per vertex, the number of its atoms below ``(h + 1) · 2¹⁶``.
+    **Attributes:**
+
+    - `atom_lists`: ``(n, D)``, the atoms containing each vertex in increasing order, padded
+      with ``q``: uint16 as built, their low 16 bits when ``atom_segments`` is given
+      (`bsfjax._frame._packed_lists`); any integer dtype for hand-made lists.
+    - `coeffs`: ``(k, q)`` spectral coefficients of each atom's kernel.
+    - `taus`, `centers`, `mass`, `gammas`, `tau_convention`, `columns`: as in [`bsfjax.Frame`][bsfjax.Frame].
+    - `atom_segments`: ``(n, S)`` int32, ``S = q >> 16``, or ``None`` (``q < 2¹⁶`` or plain
+      lists): per vertex, the number of its atoms below ``(h + 1) · 2¹⁶``.
     """
 
     atom_lists: Int[Array, "n D"]
@@ -104,7 +103,7 @@ class SparseFrame(AbstractFrame):
                               ).sum(dtype=np.int64))
 
     def host_lists(self, rows=slice(None)) -> np.ndarray:
-        """int32 atom lists of ``rows`` on the host, decoded (`bsfjax._packed_lists`)."""
+        """int32 atom lists of ``rows`` on the host, decoded (`bsfjax._frame._packed_lists`)."""
         seg = self.atom_segments
         return decode_host(np.asarray(self.atom_lists)[rows],
                            None if seg is None else np.asarray(seg)[rows])
@@ -134,8 +133,6 @@ class SparseFrame(AbstractFrame):
                            "ErrorOMP ('omp', 'omp_error') for frames this large")
         dtype = self.dtype if w is None else jnp.result_type(self.dtype, w)
 
-        from ._sparse_gram import _lists_to_scipy
-
         def host(lists, seg, w):
             Bs = _lists_to_scipy(np.asarray(lists), q, None if w is None else np.asarray(w),
                                  None if seg is None else np.asarray(seg))
@@ -151,8 +148,6 @@ class SparseFrame(AbstractFrame):
 
     def host_gram_source(self, w, n_rows: int):
         """Always: rows from the lists and their 16-bit transpose (`EllGramSource`)."""
-        from ._sparse_gram import EllGramSource
-
         return EllGramSource(self, None if w is None else np.asarray(w, np.float64))
 
     # ---------------------------------------------------------------- structure
@@ -220,8 +215,6 @@ class SparseFrame(AbstractFrame):
 
     def to_scipy(self, weights=None) -> sp.csr_matrix:
         """``B`` (or ``diag(√w) B`` with ``weights``) as a float64 scipy CSR matrix (host)."""
-        from ._sparse_gram import _lists_to_scipy
-
         seg = self.atom_segments
         return _lists_to_scipy(np.asarray(self.atom_lists), self.n_atoms,
                                None if weights is None else np.asarray(weights, np.float64),
@@ -243,9 +236,9 @@ def sparse_atoms(evecs, coeffs, gammas) -> jax.Array:
 
 
 def sparse_atom_lists(evecs, coeffs, gammas):
-    """``(n, D)`` packed atom lists and their segments (`bsfjax._packed_lists`) of
+    """``(n, D)`` packed atom lists and their segments (`bsfjax._frame._packed_lists`) of
     ``B = [|g| ≥ γ · max_v |g|]`` for ``g = evecs @ coeffs`` (the rule of
-    `bsfjax._binarize.kernel_mask`), never forming the ``(n, q)`` matrix.
+    `bsfjax._frame._binarize.kernel_mask`), never forming the ``(n, q)`` matrix.
 
     One pass over blocks of whole columns (atoms), ``n × cb ≈ 2²⁴`` kernel values each: the
     device computes a block's mask (and its column maxima) while the host turns the previous
@@ -283,7 +276,7 @@ def sparse_atom_lists(evecs, coeffs, gammas):
     collect(*pending)
     del pending, mask
     out, seg = lists.finish_packed()
-    release_free_memory()  # the per-block temporaries (see bsfjax._memory)
+    release_free_memory()  # the per-block temporaries (see bsfjax._util._memory)
     # The aligned host buffer becomes the device array without a copy on CPU (device_put
     # aliases 64-byte aligned numpy memory); jnp.asarray would copy it.
     return jax.device_put(out), _device(seg)
@@ -307,7 +300,7 @@ def _aligned_empty(shape, dtype, align: int = 64) -> np.ndarray:
 
 class _ListBuilder:
     """Per-vertex sorted atom lists built by appending, with no growth copies of the whole,
-    in 16 bits (`bsfjax._packed_lists`; ``segments`` counted as the atoms arrive).
+    in 16 bits (`bsfjax._frame._packed_lists`; ``segments`` counted as the atoms arrive).
 
     The final width ``D`` (the largest count) is known only after the last block, and
     re-padding one ``(n, W)`` array each time ``W`` grows would hold two copies.  So the
@@ -378,212 +371,16 @@ class _ListBuilder:
         return out, (seg if seg.shape[1] else None)
 
 
-# --------------------------------------------------------------------------- products
+# --------------------------------------------------------------------------- Gram matrix
 
 
-def _product_rows(n: int, width: int, m: int) -> int:
-    return int(max(1, min(n, _PRODUCT_ELEMS // max(width * m, 1))))
+def sparse_gram(frame: SparseFrame, weights=None) -> sp.csr_matrix:
+    """``G = Bᵀ W B`` ``(q, q)`` as float64 scipy CSR (host; ``W = diag(weights)`` or ``I``).
 
-
-def _block_start(i, nb: int, n: int):
-    """First row of block ``i`` of ``nb`` rows: ``i · nb``, except that the last block is moved
-    back to end at row ``n`` (it then overlaps its predecessor).  Slicing the unpadded lists
-    this way avoids the padded copy of the whole ``(n, D)`` array that blocking would need."""
-    return jnp.minimum(i * nb, n - nb)
-
-
-def _rows(atom_lists, segments, s, nb: int):
-    """int32 atoms of rows ``s … s + nb`` (decoded from the packed lists)."""
-    rows = jax.lax.dynamic_slice_in_dim(atom_lists, s, nb)
-    seg = None if segments is None else jax.lax.dynamic_slice_in_dim(segments, s, nb)
-    return decode_traced(rows, seg)
-
-
-@jax.jit
-def ell_matmul(atom_lists: jax.Array, X: jax.Array, segments=None) -> jax.Array:
-    """``B X``: ``(n, m)`` from ``X`` ``(q, m)`` (gather-sum over each vertex's atoms);
-    ``segments`` of packed lists (`bsfjax._packed_lists`) or ``None``."""
-    n, width = atom_lists.shape
-    m = X.shape[1]
-    Xp = jnp.concatenate([X, jnp.zeros((1,) + X.shape[1:], X.dtype)])  # row q: padding
-    if n == 0:
-        return jnp.zeros((0, m), X.dtype)
-    nb = _product_rows(n, width, m)
-
-    def block(i, out):  # the overlapping rows of the last block get the same values again
-        s = _block_start(i, nb, n)
-        rows = _rows(atom_lists, segments, s, nb)
-        return jax.lax.dynamic_update_slice_in_dim(out, jnp.sum(Xp[rows], axis=1), s, axis=0)
-
-    return jax.lax.fori_loop(0, -(-n // nb), block, jnp.zeros((n, m), X.dtype))
-
-
-@partial(jax.jit, static_argnames="q")
-def _block_counts(atom_lists: jax.Array, q: int, segments=None) -> jax.Array:
-    """Entries ``< q`` of each row block (int32 per block, summed in int64 by the caller).  A
-    loop over blocks: ``jnp.sum(atom_lists < q)`` may materialise the ``(n, D)`` mask (0.9 GB
-    at 445K vertices)."""
-    n, width = atom_lists.shape
-    if n == 0:
-        return jnp.zeros(0, jnp.int32)
-    nb = _product_rows(n, width, 1)
-
-    def block(i, counts):
-        s = _block_start(i, nb, n)
-        rows = _rows(atom_lists, segments, s, nb)
-        fresh = (s + jnp.arange(nb) >= i * nb)[:, None]  # not counted by the previous block
-        return counts.at[i].set(jnp.sum((rows < q) & fresh, dtype=jnp.int32))
-
-    n_blocks = -(-n // nb)
-    return jax.lax.fori_loop(0, n_blocks, block, jnp.zeros(n_blocks, jnp.int32))
-
-
-@partial(jax.jit, static_argnames="q")
-def ell_rmatmul(atom_lists: jax.Array, Y: jax.Array, q: int, segments=None) -> jax.Array:
-    """``Bᵀ Y``: ``(q, m)`` from ``Y`` ``(n, m)`` (scatter-add of each vertex's row)."""
-    n, width = atom_lists.shape
-    m = Y.shape[1]
-    acc = jnp.zeros((q + 1, m), Y.dtype)  # row q collects the padding
-    if n == 0:
-        return acc[:q]
-    nb = _product_rows(n, width, m)
-
-    def step(i, acc):
-        s = _block_start(i, nb, n)
-        rows = _rows(atom_lists, segments, s, nb)
-        y = jax.lax.dynamic_slice_in_dim(Y, s, nb)
-        # rows of the last block that its predecessor already added go to the padding row
-        rows = jnp.where((s + jnp.arange(nb) >= i * nb)[:, None], rows, q)
-        upd = jnp.broadcast_to(y[:, None, :], rows.shape + (m,))
-        return acc.at[rows].add(upd, mode="drop")
-
-    return jax.lax.fori_loop(0, -(-n // nb), step, acc)[:q]
-
-
-# --------------------------------------------------------------------------- host transpose
-
-#: ELL entries (or transposed entries) per chunk of the host passes below.
-_HOST_CHUNK_ELEMS = 2**23
-
-
-def _row_chunks(lo: int, hi: int, width: int):
-    """Row ranges covering ``[lo, hi)`` of about `_HOST_CHUNK_ELEMS` entries each."""
-    step = max(1, _HOST_CHUNK_ELEMS // max(width, 1))
-    return [(s, min(s + step, hi)) for s in range(lo, hi, step)]
-
-
-#: Vertices per panel of `AtomVertices` (``2**_PANEL_BITS``; 16 bits fit uint16).
-_PANEL_BITS = 16
-
-
-class AtomVertices(NamedTuple):
-    """The transpose of the atom lists (the CSC structure of ``B``) in 16-bit panels.
-
-    ``supp b_j`` (increasing) is stored in ``lo[indptr[j]:indptr[j+1]]`` as offsets within
-    panels of ``2**16`` vertices: entries ``starts[j, p] … starts[j, p+1]`` lie in panel ``p``
-    (vertex ``= p · 2**16 + lo``).  Half the memory of int32 indices (``nnz · 2`` bytes plus
-    ``q × (panels + 1)`` offsets): the host Gram rows of OMP need it next to the lists.
+    Unweighted entries are the exact overlap counts ``|supp b_i ∩ supp b_j|``.  Cost
+    ``Σ_v D_v²`` (``D_v`` atoms at vertex ``v``), memory ``O(nnz(G))``.
     """
-
-    indptr: np.ndarray  # (q + 1,) int64
-    starts: np.ndarray  # (q, panels + 1) int64, starts[:, -1] = indptr[1:]
-    lo: np.ndarray  # (nnz,) uint16
-
-    def vertices(self, j: int) -> np.ndarray:
-        """``supp b_j``: ``(|supp b_j|,)`` int64 vertex indices, increasing."""
-        a, b = int(self.indptr[j]), int(self.indptr[j + 1])
-        hi = np.repeat(np.arange(self.starts.shape[1] - 1, dtype=np.int64) << _PANEL_BITS,
-                       np.diff(self.starts[j]))
-        return self.lo[a:b] + hi
-
-
-def atom_vertices(atom_lists, q: int, segments=None) -> AtomVertices:
-    """`AtomVertices` of the lists: ``supp b_j`` for every atom, sorted.
-
-    A counting sort in row chunks of about `_HOST_CHUNK_ELEMS` entries, each within one
-    panel: every chunk is transposed by scipy (``csr_tocsc``, O(entries), int8 data) and its
-    vertices are written after those of the earlier chunks, so each atom's vertices stay
-    sorted.  Memory: the result plus per-chunk buffers; no array of all entries wider than 16
-    bits, no float data.
-    """
-    lists = np.asarray(atom_lists)  # on CPU a view of the device buffer, not a copy
-    seg = None if segments is None else np.asarray(segments)
-    n, width = lists.shape
-
-    def rows(s, e):
-        return decode_host(lists[s:e], None if seg is None else seg[s:e])
-
-    panel = 1 << _PANEL_BITS
-    n_panels = max(1, -(-n // panel))
-    counts = np.zeros(q + 1, np.int64)
-    for s, e in _row_chunks(0, n, width):
-        counts += np.bincount(rows(s, e).ravel(), minlength=q + 1)
-    indptr = np.zeros(q + 1, np.int64)
-    np.cumsum(counts[:q], out=indptr[1:])
-    lo = np.empty(int(indptr[-1]), np.uint16 if _PANEL_BITS <= 16 else np.uint32)
-    starts = np.empty((q, n_panels + 1), np.int64)
-    nxt = indptr[:-1].copy()  # next free slot of each atom
-    for p in range(n_panels):
-        starts[:, p] = nxt
-        for s, e in _row_chunks(p * panel, min(n, (p + 1) * panel), width):
-            block = rows(s, e)
-            valid = block < q
-            ptr = np.zeros(e - s + 1, np.int64)
-            np.cumsum(valid.sum(axis=1), out=ptr[1:])
-            atoms = block[valid]
-            csc = sp.csr_matrix((np.ones(atoms.size, np.int8), atoms, ptr),
-                                shape=(e - s, q)).tocsc()
-            per = np.diff(csc.indptr)
-            dest = np.repeat(nxt - csc.indptr[:-1], per) + np.arange(csc.nnz)
-            lo[dest] = csc.indices + (s - p * panel)
-            nxt += per
-    starts[:, n_panels] = nxt
-    return AtomVertices(indptr, starts, lo)
-
-
-def atom_sums(av: AtomVertices, vals: np.ndarray) -> np.ndarray:
-    """``(q,)`` float64 ``s_j = Σ_{v ∈ supp b_j} vals[v]``, summed in increasing ``v`` (the
-    order of scipy's CSR products), in chunks of whole atoms."""
-    q = av.indptr.size - 1
-    out = np.zeros(q, np.float64)
-    step = max(1, int(q * _HOST_CHUNK_ELEMS // max(int(av.indptr[-1]), 1)))
-    for a in range(0, q, step):
-        b = min(a + step, q)
-        verts = np.concatenate([av.vertices(j) for j in range(a, b)] + [np.zeros(0, np.int64)])
-        owner = np.repeat(np.arange(b - a), np.diff(av.indptr[a:b + 1]))
-        out[a:b] = np.bincount(owner, weights=vals[verts], minlength=b - a)
-    return out
-
-
-def ell_gram_rows(atom_lists, av: AtomVertices, ks, vals=None, segments=None) -> np.ndarray:
-    """Rows ``G[k, :] = Σ_{v ∈ supp b_k} vals[v] · B[v, :]`` ``(len(ks), q)`` float64 (host).
-
-    ``vals = None``: the overlap counts ``|supp b_k ∩ supp b_j|`` (exact), else the weighted
-    rows of ``BᵀWB`` with ``vals = w`` (summed in increasing ``v``).  Each row is a
-    ``bincount`` over the lists of the vertices of atom ``k`` (from `atom_vertices`):
-    ``O(|supp b_k| · D)``, in vertex chunks of about `_HOST_CHUNK_ELEMS` entries so that
-    a large atom needs no ``|supp| × D`` int64 buffer (the weighted row of such an atom then
-    adds the chunks' partial sums).
-    """
-    lists = np.asarray(atom_lists)
-    seg = None if segments is None else np.asarray(segments)
-    q = av.indptr.size - 1
-    width = lists.shape[1]
-    step = max(1, _HOST_CHUNK_ELEMS // max(width, 1))
-    out = np.zeros((len(ks), q + 1), np.float64)  # column q: the padding
-    for i, k in enumerate(np.asarray(ks, np.int64).tolist()):
-        supp = av.vertices(k)
-        for s in range(0, supp.size, step):
-            verts = supp[s:s + step]
-            wts = None if vals is None else np.repeat(vals[verts], width)
-            ids = decode_host(lists[verts], None if seg is None else seg[verts])
-            out[i] += np.bincount(ids.ravel(), weights=wts, minlength=q + 1)
-    return out[:, :q]
-
-
-def __getattr__(name):  # sparse_gram lives in bsfjax._sparse_gram (imports this module)
-    if name == "sparse_gram":
-        from ._sparse_gram import sparse_gram
-
-        return sparse_gram
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    if not isinstance(frame, SparseFrame):
+        raise BSFError(f"frame must be a bsfjax.SparseFrame, got {type(frame).__name__}")
+    B = frame.to_scipy(weights)
+    return (B.T.tocsr() @ B).tocsr()

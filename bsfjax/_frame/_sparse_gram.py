@@ -1,5 +1,11 @@
 """Host Gram matrices of a [`bsfjax.SparseFrame`][bsfjax.SparseFrame]: ``BᵀWB`` as scipy CSR and OMP's Gram
-rows from the atom lists and their 16-bit transpose (split from `bsfjax._sparse_frame`).
+rows from the atom lists and their 16-bit transpose.
+
+Owner of: `_lists_to_scipy` (the lists as a scipy CSR ``B`` or ``diag(√w) B``) and
+`EllGramSource` (OMP's host Gram rows).  Both work on the lists of a frame only (through the
+kernels of `bsfjax._frame._ell`), so this module does not import the frame class: the public
+`sparse_gram` lives next to [`SparseFrame`][bsfjax.SparseFrame] in
+`bsfjax._frame._sparse_frame`, which imports this module (one way).
 """
 
 from __future__ import annotations
@@ -7,12 +13,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .._util import BSFError
 from .._util import release_free_memory
+from ._ell import _row_chunks, atom_sums, atom_vertices, ell_gram_rows
 from ._packed_lists import decode_host
-from ._sparse_frame import SparseFrame, _row_chunks, atom_sums, atom_vertices, ell_gram_rows
 
-__all__ = ["sparse_gram", "EllGramSource"]
+__all__ = ["EllGramSource"]
 
 
 def _lists_to_scipy(lists: np.ndarray, q: int, weights, segments=None) -> sp.csr_matrix:
@@ -33,18 +38,6 @@ def _lists_to_scipy(lists: np.ndarray, q: int, weights, segments=None) -> sp.csr
                          shape=(n, q))
 
 
-def sparse_gram(frame: SparseFrame, weights=None) -> sp.csr_matrix:
-    """``G = Bᵀ W B`` ``(q, q)`` as float64 scipy CSR (host; ``W = diag(weights)`` or ``I``).
-
-    Unweighted entries are the exact overlap counts ``|supp b_i ∩ supp b_j|``.  Cost
-    ``Σ_v D_v²`` (``D_v`` atoms at vertex ``v``), memory ``O(nnz(G))``.
-    """
-    if not isinstance(frame, SparseFrame):
-        raise BSFError(f"frame must be a bsfjax.SparseFrame, got {type(frame).__name__}")
-    B = frame.to_scipy(weights)
-    return (B.T.tocsr() @ B).tocsr()
-
-
 class EllGramSource:
     """Gram rows ``b_kᵀ W B`` of a [`SparseFrame`][bsfjax.SparseFrame] from its own atom lists (host view) and
     their 16-bit transpose (`atom_vertices`): about ``nnz · 2`` bytes besides the lists,
@@ -55,7 +48,7 @@ class EllGramSource:
     ``diag(√w) B`` CSR product.
     """
 
-    def __init__(self, frame: SparseFrame, w64):
+    def __init__(self, frame, w64):  # frame: a SparseFrame (not imported: it imports this)
         self.lists = np.asarray(frame.atom_lists)  # on CPU a view of the device buffer
         seg = frame.atom_segments
         self.seg = None if seg is None else np.asarray(seg)
@@ -76,6 +69,6 @@ class EllGramSource:
         return ell_gram_rows(self.lists, self.av, ks, self.vals, self.seg)
 
     def release(self) -> None:
-        """Return the transpose's memory (see `bsfjax._memory`)."""
+        """Return the transpose's memory (see `bsfjax._util._memory`)."""
         self.av = self.lists = self.seg = None
         release_free_memory()

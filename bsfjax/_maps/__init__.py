@@ -1,4 +1,12 @@
-"""Functional maps: descriptors, the descriptor-commutativity estimate, ZoomOut, point-map conversion and refinement, and the map estimator."""
+"""Functional maps between two spectra, and the map estimator.
+
+Descriptors (WKS, HKS), the descriptor-commutativity estimate of `C` (Nogneng & Ovsjanikov
+2017, solved with optimistix) with an optional orientation term, ZoomOut, conversions between
+functional and point maps, the refinement behind the `refined` method, the measures that
+choose among landmark-free maps (geodesic distortion, orientation agreement), and
+`estimate_map`, which runs them from two spectra (and meshes) to one map.  The map stages of the
+batched collection path live here too.
+"""
 
 from ._batched import (
     StageConfig, map_stage, point_map_stage, problem_stage, source_ops_stage, spectra,
@@ -6,11 +14,8 @@ from ._batched import (
 from ._descriptors import hks, hks_times, wks, wks_energies
 from ._distortion import choose_map, map_distortion, orientation_agreement
 from ._estimation import FmapWeights, estimate_fmap, fmap_energy
-from ._estimator import (
-    LANDMARK_FREE_STARTS, MapEstimate, ORIENTATION_SLACK, ORIENT_WEIGHT, TURN_RADIUS,
-    TURN_SAMPLES, WKS_VARIANCE, ZOOMOUT_SAMPLES, check_landmark_pairs, check_starts,
-    estimate_map, mirror_symmetry,
-)
+from ._estimate import MapEstimate, check_landmark_pairs, check_starts
+from ._estimator import MapEstimator, estimate_map, mirror_symmetry
 from ._fmap import (
     check_samples, chunk_for, default_chunk, fmap_from_p2p, fmap_to_p2p, icp_refine,
     nearest_neighbors, zoomout,
@@ -22,9 +27,8 @@ from ._refine import (
 )
 
 __all__ = [
-    "FmapWeights", "LANDMARK_FREE_STARTS", "MapEstimate", "ORIENTATION_SLACK", "ORIENT_WEIGHT",
-    "OrientationBasis", "REFINE_EIGENPAIRS", "StageConfig", "TURN_RADIUS", "TURN_SAMPLES",
-    "WKS_VARIANCE", "ZOOMOUT_SAMPLES", "check_landmark_pairs", "check_options", "check_samples",
+    "FmapWeights", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
+    "StageConfig", "check_landmark_pairs", "check_options", "check_samples",
     "check_starts", "choose_map", "chunk_for", "default_chunk", "estimate_fmap", "estimate_map",
     "face_geometry", "fmap_energy", "fmap_from_p2p", "fmap_to_p2p", "hks", "hks_times",
     "icp_refine", "map_distortion", "map_stage", "mirror_symmetry", "nearest_neighbors",

@@ -12,10 +12,11 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from ._descriptors import _wks_jit
-from ._estimation import FmapWeights, _cast, _energy, _setup, _Shape, _shape_ops, _solve, _weights_array
-from ._orientation import _Geometry
+from ._estimation import FmapWeights, _weights_array
+from ._fmap_problem import _setup, _Shape, _shape_ops
+from ._fmap_solve import _energy, _solve
+from ._orientation import _cast, _Geometry
 from ._fmap import _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
-from ._estimator import ORIENT_WEIGHT, WKS_VARIANCE, ZOOMOUT_STEP
 from .._sampling import Subsample
 from .._spectral import Spectrum
 
@@ -31,6 +32,10 @@ class StageConfig(NamedTuple):
     n_landmarks: int  # 0: orientation term instead
     chunk: int
     zoomout_chunk: int | None  # None: ZoomOut on every vertex, else on the subsamples
+    # the single start's fields of the collection's MapEstimator
+    wks_variance: float
+    orient_weight: float
+    zoomout_step: int
 
 
 def spectra(rep, it):
@@ -45,12 +50,12 @@ def _source_spectrum(rep):
 
 def _descriptors(s: Spectrum, lm, cfg: StageConfig):
     """WKS of the first ``k`` eigenpairs, and WKS at the landmarks ``lm`` when given (the
-    single start of [`bsfjax.estimate_map`][bsfjax.estimate_map]: variance ``WKS_VARIANCE``)."""
+    single start of [`MapEstimator`][bsfjax.MapEstimator]: its ``wks_variance``)."""
     k = cfg.k
 
     def w(landmarks):
         return _wks_jit(s.evals[:k], s.evecs[:, :k], s.mass, None, None, landmarks,
-                        WKS_VARIANCE, n_energies=cfg.n_energies, area_normalize=True,
+                        cfg.wks_variance, n_energies=cfg.n_energies, area_normalize=True,
                         scaled=True)
     return w(None) if lm is None else jnp.concatenate([w(None), w(lm)], axis=1)
 
@@ -85,7 +90,7 @@ def problem_stage(rep, it, ops_m, *, cfg: StageConfig):
     dt = jnp.result_type(float)
     km = cfg.k_map
     src, tgt = spectra(rep, it)
-    weights = FmapWeights() if cfg.n_landmarks else FmapWeights(orient=ORIENT_WEIGHT)
+    weights = FmapWeights() if cfg.n_landmarks else FmapWeights(orient=cfg.orient_weight)
     sn = _shape(tgt, _geometry_of(it, cfg), cfg,
                 _descriptors(tgt, it.get("landmarks_target"), cfg))
     sm = _shape(src, None, cfg)  # its descriptors' operators (orientation too): ops_m
@@ -103,7 +108,7 @@ def problem_stage(rep, it, ops_m, *, cfg: StageConfig):
 
 def map_stage(pb, zo, *, cfg: StageConfig):
     """The functional map: the estimate ``C₀`` (``k × k``), then ZoomOut ``k → k_map`` in steps
-    of ``ZOOMOUT_STEP`` on the subsamples, as [`bsfjax.estimate_map`][bsfjax.estimate_map].  Free of the vertex
+    of ``cfg.zoomout_step`` on the subsamples, as [`MapEstimator`][bsfjax.MapEstimator].  Free of the vertex
     count when ZoomOut runs on subsamples."""
     dt = jnp.result_type(float)
     rtol, atol = (1e-10, 1e-12) if dt == jnp.float64 else (1e-4, 1e-6)
@@ -112,7 +117,8 @@ def map_stage(pb, zo, *, cfg: StageConfig):
     if km <= k:
         return C0
     zo_m, zo_n, w_n = zo
-    sizes = _size_schedule(k, km, ZOOMOUT_STEP, -(-(km - k) // ZOOMOUT_STEP))
+    step = cfg.zoomout_step
+    sizes = _size_schedule(k, km, step, -(-(km - k) // step))
     chunk = cfg.chunk if cfg.zoomout_chunk is None else cfg.zoomout_chunk
     return _zoomout_jit(C0, zo_m, zo_n, w_n, sizes_n=sizes, sizes_m=sizes, chunk=chunk,
                         adjoint=False)

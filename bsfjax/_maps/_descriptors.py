@@ -223,20 +223,22 @@ def hks(spectrum: Spectrum, n_times: int = 100, *, times=None, landmarks=None, k
         area_normalize: bool = True, scaled: bool = True) -> jax.Array:
     """Heat kernel signature ``Σ_l e^{−t λ_l} φ_l(x)²``, or heat kernels at ``landmarks``.
 
-    Args:
-        spectrum: a ``Spectrum``, possibly stacked (``(..., n, k)`` evecs).
-        n_times: number of automatic times (log-spaced in [4 ln10/λ_k, 4 ln10/λ₂]); ignored when
-            ``times`` is given.
-        times: ``(T,)`` or ``(..., T)`` diffusion times (on the unit-area shape when
-            ``area_normalize``).
-        landmarks: ``(p,)`` or ``(..., p)`` vertex indices: return the heat kernels
-            ``Σ_l e^{−t λ_l} φ_l(y) φ_l(x)`` centred at each landmark ``y`` instead.
-        k: use only the first ``k`` eigenpairs (default: all).
-        area_normalize: evaluate on the shape rescaled to unit area (see module doc).
-        scaled: divide each column by ``Σ_l e^{−t λ_l}``.
+    **Arguments:**
 
-    Returns:
-        ``(..., n, T)``, or ``(..., n, p·T)`` landmark-major with ``landmarks``.
+    - `spectrum`: a ``Spectrum``, possibly stacked (``(..., n, k)`` evecs).
+    - `n_times`: number of automatic times (log-spaced in [4 ln10/λ_k, 4 ln10/λ₂]); ignored when
+      ``times`` is given.
+    - `times`: ``(T,)`` or ``(..., T)`` diffusion times (on the unit-area shape when
+      ``area_normalize``).
+    - `landmarks`: ``(p,)`` or ``(..., p)`` vertex indices: return the heat kernels
+      ``Σ_l e^{−t λ_l} φ_l(y) φ_l(x)`` centred at each landmark ``y`` instead.
+    - `k`: use only the first ``k`` eigenpairs (default: all).
+    - `area_normalize`: evaluate on the shape rescaled to unit area (see module doc).
+    - `scaled`: divide each column by ``Σ_l e^{−t λ_l}``.
+
+    **Returns:**
+
+    ``(..., n, T)``, or ``(..., n, p·T)`` landmark-major with ``landmarks``.
     """
     n, k_avail, batch = _check(spectrum)
     k = _check_k(k, k_avail)
@@ -258,22 +260,24 @@ def wks(spectrum: Spectrum, n_energies: int = 100, *, energies=None, sigma=None,
         scaled: bool = True) -> jax.Array:
     """Wave kernel signature ``Σ_l exp(−(e − log λ_l)²/2σ²) φ_l(x)²`` (Aubry et al. 2011).
 
-    Args:
-        spectrum: a ``Spectrum``, possibly stacked.
-        n_energies: number of automatic log-energies (see module doc); ignored when
-            ``energies`` is given.
-        energies: ``(E,)`` or ``(..., E)`` log-energies ``e`` (of the unit-area shape when
-            ``area_normalize``).
-        sigma: width σ of the log-energy filters; default ``variance · (e_max − e_min) / E``
-            (required to be given with ``energies`` unless automatic).
-        variance: σ in units of the energy range divided by ``n_energies`` (pyFM: 7).
-        landmarks: ``(p,)`` or ``(..., p)`` vertex indices: return
-            ``Σ_l w_l(e) φ_l(y) φ_l(x)`` centred at each landmark ``y``.
-        k: use only the first ``k`` eigenpairs (default: all).
-        area_normalize, scaled: as in [`hks`][bsfjax.hks].
+    **Arguments:**
 
-    Returns:
-        ``(..., n, E)``, or ``(..., n, p·E)`` landmark-major with ``landmarks``.
+    - `spectrum`: a ``Spectrum``, possibly stacked.
+    - `n_energies`: number of automatic log-energies (see module doc); ignored when
+      ``energies`` is given.
+    - `energies`: ``(E,)`` or ``(..., E)`` log-energies ``e`` (of the unit-area shape when
+      ``area_normalize``).
+    - `sigma`: width σ of the log-energy filters; default ``variance · (e_max − e_min) / E``
+      (required to be given with ``energies`` unless automatic).
+    - `variance`: σ in units of the energy range divided by ``n_energies`` (pyFM: 7).
+    - `landmarks`: ``(p,)`` or ``(..., p)`` vertex indices: return
+      ``Σ_l w_l(e) φ_l(y) φ_l(x)`` centred at each landmark ``y``.
+    - `k`: use only the first ``k`` eigenpairs (default: all).
+    - `area_normalize`, `scaled`: as in [`hks`][bsfjax.hks].
+
+    **Returns:**
+
+    ``(..., n, E)``, or ``(..., n, p·E)`` landmark-major with ``landmarks``.
     """
     n, k_avail, batch = _check(spectrum)
     k = _check_k(k, k_avail)

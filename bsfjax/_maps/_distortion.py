@@ -27,13 +27,14 @@ keeps the orientation of small triangles.  Two numbers measure this from the mes
   target's faces ``(a, b, c)`` whose images ``(T a, T b, T c)`` (three distinct source vertices)
   turn the same way as the source surface, ``(n_Ta + n_Tb + n_Tc) · ((x_Tb − x_Ta) × (x_Tc −
   x_Ta)) > 0`` with ``n`` the source's area-weighted vertex normals.  A mirror image has
-  agreement near 0, a right map near 1 (0.90–0.97 on the FAUST pairs of docs/results.md: a
+  agreement near 0, a right map near 1 (0.90–0.97 on the FAUST pairs of
+  docs/results/segmentation.md: a
   vertex-to-vertex map folds some small triangles), a partly mirrored map in between.  Both
   meshes must be consistently oriented.
 
 [`choose_map`][bsfjax.choose_map] combines them: among maps within ``slack`` of the best orientation, the one
 of least distortion.  [`bsfjax.estimate_map`][bsfjax.estimate_map] uses it to pick among its starts when it has
-no landmarks (docs/results.md, "Without landmarks").
+no landmarks (docs/results/segmentation.md, "Without landmarks").
 """
 
 from __future__ import annotations
@@ -53,7 +54,8 @@ __all__ = ["map_distortion", "orientation_agreement", "choose_map", "DISTORTION_
 DISTORTION_SAMPLES = 100
 
 #: [`choose_map`][bsfjax.choose_map] keeps the maps whose orientation agreement is at most this far below the
-#: best one's (on the FAUST pairs of docs/results.md: right maps 0.90–0.97, partly mirrored or
+#: best one's (on the FAUST pairs of docs/results/segmentation.md: right maps 0.90–0.97, partly
+#: mirrored or
 #: slid ones down to 0.34).
 ORIENTATION_SLACK = 0.1
 
@@ -79,14 +81,16 @@ def map_distortion(source_mesh: Mesh, target_mesh: Mesh, p2p, *,
     **Arguments:**
 
     - ``source_mesh``, ``target_mesh``: the meshes ``M`` and ``N``.
-    - ``p2p``: ``(n_N,)`` source vertex of each target vertex, or ``(B, n_N)`` for ``B`` maps
+    - `p2p`: ``(n_N,)`` source vertex of each target vertex, or ``(B, n_N)`` for ``B`` maps
       (the target's distances are computed once, the source's once per distinct image).
-    - ``n_samples``: farthest-point samples of the target (all vertices if fewer).
-    - ``radius``: ``None`` (every pair, absolute differences), or the local distortion over
+    - `n_samples`: farthest-point samples of the target (all vertices if fewer).
+    - `radius`: ``None`` (every pair, absolute differences), or the local distortion over
       the pairs closer than ``radius`` (in units of √area of the target), relative to their
       distance on the target.
 
-    **Returns:** a float (or ``(B,)`` floats), 0 for an isometry; in units of √area, or a
+    **Returns:**
+
+    a float (or ``(B,)`` floats), 0 for an isometry; in units of √area, or a
     ratio with a ``radius``.
     """
     maps, single = _check_pair(source_mesh, target_mesh, p2p)
@@ -176,9 +180,11 @@ def orientation_agreement(source_mesh: Mesh, target_mesh: Mesh, p2p):
     **Arguments:**
 
     - ``source_mesh``, ``target_mesh``: consistently oriented meshes ``M`` and ``N``.
-    - ``p2p``: ``(n_N,)`` or ``(B, n_N)`` point map(s) ``T: N → M``.
+    - `p2p`: ``(n_N,)`` or ``(B, n_N)`` point map(s) ``T: N → M``.
 
-    **Returns:** a float (or ``(B,)``) in [0, 1]: 1 for a map that keeps every triangle's
+    **Returns:**
+
+    a float (or ``(B,)``) in [0, 1]: 1 for a map that keeps every triangle's
     orientation, 0 for a mirror image; faces whose three images are not distinct do not count.
     """
     maps, single = _check_pair(source_mesh, target_mesh, p2p)
@@ -216,7 +222,7 @@ def choose_map(distortion, orientation, *, slack: float = ORIENTATION_SLACK) -> 
 
     - ``distortion``, ``orientation``: ``(B,)`` values of [`map_distortion`][bsfjax.map_distortion] and
       [`orientation_agreement`][bsfjax.orientation_agreement] for ``B`` candidate maps.
-    - ``slack``: in [0, 1].
+    - `slack`: in [0, 1].
     """
     d = np.asarray(distortion, np.float64)
     o = np.asarray(orientation, np.float64)

@@ -236,10 +236,11 @@ def nearest_neighbors(reference, queries, *, chunk_size: int | None = None) -> j
 def fmap_from_p2p(source_spectrum: Spectrum, target_spectrum: Spectrum, p2p) -> jax.Array:
     """The functional map of a point map: ``C = Φ_Nᵀ A_N Π Φ_M``, shape ``(k_N, k_M)``.
 
-    Args:
-        source_spectrum: spectrum of the source shape ``M`` (its ``k`` sets ``k_M``).
-        target_spectrum: spectrum of the target shape ``N`` (``k_N``; ``A_N`` is its ``mass``).
-        p2p: ``(n_N,)`` integer array, ``p2p[i]`` the source vertex matched to target vertex ``i``.
+    **Arguments:**
+
+    - `source_spectrum`: spectrum of the source shape ``M`` (its ``k`` sets ``k_M``).
+    - `target_spectrum`: spectrum of the target shape ``N`` (``k_N``; ``A_N`` is its ``mass``).
+    - `p2p`: ``(n_N,)`` integer array, ``p2p[i]`` the source vertex matched to target vertex ``i``.
 
     Use ``Spectrum.truncate(k)`` for a smaller map.  With ``p2p`` the identity between a shape
     and itself, ``C`` is the identity (Φᵀ A Φ = I).
@@ -264,20 +265,22 @@ def fmap_to_p2p(C, source_spectrum: Spectrum, target_spectrum: Spectrum, *,
     the comparison presumes an orthogonal ``C``, which an isometry has between shapes of equal
     area, so the point map does not depend on either mesh's units.
 
-    Args:
-        C: ``(k_N, k_M)`` functional map from source ``M`` to target ``N``.  The first ``k_M``
-            (``k_N``) eigenvectors of the source (target) spectrum are used.
-        source_spectrum, target_spectrum: spectra of ``M`` and ``N``.
-        adjoint: compare Φ_N C with Φ_M instead of Φ_N with Φ_M Cᵀ (the two agree for an
-            orthogonal C; pyFM's ``use_adj``).
-        chunk_size: target vertices per chunk (memory ``chunk_size × n_M``); default about
-            2 M distances at once.
-        rows: target vertex indices to map (default: every vertex).  Each vertex's match is
-            the one it has in the whole map; only the search is smaller.
+    **Arguments:**
 
-    Returns:
-        ``(n_N,)`` int32: ``p2p[i]`` is the source vertex matched to target vertex ``i``
-        (with ``rows``, ``(len(rows),)``: the match of vertex ``rows[i]``).
+    - `C`: ``(k_N, k_M)`` functional map from source ``M`` to target ``N``.  The first ``k_M``
+      (``k_N``) eigenvectors of the source (target) spectrum are used.
+    - `source_spectrum`, `target_spectrum`: spectra of ``M`` and ``N``.
+    - `adjoint`: compare Φ_N C with Φ_M instead of Φ_N with Φ_M Cᵀ (the two agree for an
+      orthogonal C; pyFM's ``use_adj``).
+    - `chunk_size`: target vertices per chunk (memory ``chunk_size × n_M``); default about
+      2 M distances at once.
+    - `rows`: target vertex indices to map (default: every vertex).  Each vertex's match is
+      the one it has in the whole map; only the search is smaller.
+
+    **Returns:**
+
+    ``(n_N,)`` int32: ``p2p[i]`` is the source vertex matched to target vertex ``i``
+    (with ``rows``, ``(len(rows),)``: the match of vertex ``rows[i]``).
     """
     _check_spectrum(source_spectrum, "source_spectrum")
     _check_spectrum(target_spectrum, "target_spectrum")
@@ -341,24 +344,26 @@ def zoomout(C, source_spectrum: Spectrum, target_spectrum: Spectrum, k, *, step:
     ``k``; the last step is clipped.  One jitted ``fori_loop``, on the two shapes at one area
     (as [`fmap_to_p2p`][bsfjax.fmap_to_p2p]; the result is converted back to the given bases).
 
-    Args:
-        C: ``(k₀_N, k₀_M)`` initial functional map.
-        source_spectrum, target_spectrum: with at least ``k`` eigenpairs each.
-        k: final size, an int (square map) or ``(k_source, k_target)`` as in pyFM (the map is
-            then ``(k_target, k_source)``).
-        step: basis functions added per iteration (pyFM's ``step``).
-        samples: ``None`` (every vertex), or ``(source, target)``
-            [`Subsample`][bsfjax.Subsample] s ([`bsfjax.subsample`][bsfjax.subsample]): each iteration then maps
-            the target samples to the nearest source samples and integrates over the target's
-            sample cells, ``C = Φ_N[S_N]ᵀ diag(w) Φ_M[π(S_N)]`` with ``w`` the cell areas (the
-            subsampled ZoomOut of pyFM and of Magnet & Ovsjanikov 2023).  The searches cost
-            ``s_N × s_M`` instead of ``n_N × n_M``.  Measured on 9 FAUST / FAUST_5k pairs with
-            2000 samples per shape: the same point-map accuracy as every vertex (SMPL parts
-            94.30 % vs 94.41 %, ±1 point per pair either way; docs/results.md).
-        adjoint, chunk_size: as in [`fmap_to_p2p`][bsfjax.fmap_to_p2p].
+    **Arguments:**
 
-    Returns:
-        ``(k_target, k_source)`` refined functional map; ``fmap_to_p2p`` gives its point map.
+    - `C`: ``(k₀_N, k₀_M)`` initial functional map.
+    - `source_spectrum`, `target_spectrum`: with at least ``k`` eigenpairs each.
+    - `k`: final size, an int (square map) or ``(k_source, k_target)`` as in pyFM (the map is
+      then ``(k_target, k_source)``).
+    - `step`: basis functions added per iteration (pyFM's ``step``).
+    - `samples`: ``None`` (every vertex), or ``(source, target)``
+      [`Subsample`][bsfjax.Subsample] s ([`bsfjax.subsample`][bsfjax.subsample]): each iteration then maps
+      the target samples to the nearest source samples and integrates over the target's
+      sample cells, ``C = Φ_N[S_N]ᵀ diag(w) Φ_M[π(S_N)]`` with ``w`` the cell areas (the
+      subsampled ZoomOut of pyFM and of Magnet & Ovsjanikov 2023).  The searches cost
+      ``s_N × s_M`` instead of ``n_N × n_M``.  Measured on 9 FAUST / FAUST_5k pairs with
+      2000 samples per shape: the same point-map accuracy as every vertex (SMPL parts
+      94.30 % vs 94.41 %, ±1 point per pair either way).
+    - `adjoint`, `chunk_size`: as in [`fmap_to_p2p`][bsfjax.fmap_to_p2p].
+
+    **Returns:**
+
+    ``(k_target, k_source)`` refined functional map; ``fmap_to_p2p`` gives its point map.
     """
     _check_spectrum(source_spectrum, "source_spectrum")
     _check_spectrum(target_spectrum, "target_spectrum")

@@ -12,7 +12,7 @@ piecewise-linear functions), the reduced form of g ↦ ⟨n × ∇d_q, ∇g⟩. 
 with ``s_a(t) = Σ_c φ_a(t_c)`` and ``K_t`` of `_Geometry`.  ``Y`` is one scan over the
 faces (memory ``n k²``); each estimate then needs one GEMM ``(p, n) @ (n, k²)``.  Entry
 ``(a, b)`` of ``Y`` involves ``φ_a`` and ``φ_b`` only, so the ``Y`` of ``k`` eigenvectors
-holds that of every smaller size as its top-left block: [`orientation_bases`][bsfjax.orientation_bases] scans once
+holds that of every smaller size as its top-left block: `orientation_bases` scans once
 for several estimates of a pair (the 15 starts of [`bsfjax.estimate_map`][bsfjax.estimate_map] without
 landmarks: their estimates 1.45–1.75× faster, docs/benchmarks.md).
 """
@@ -66,7 +66,7 @@ _FACE_BLOCK = 2048
 
 
 class OrientationBasis(NamedTuple):
-    """A shape's orientation operators before the descriptors ([`orientation_bases`][bsfjax.orientation_bases]):
+    """A shape's orientation operators before the descriptors (`orientation_bases`):
     ``Y`` ``(n, k, k)`` of `_orient_basis` for its first ``k`` eigenvectors.  It stands
     in for the shape's `_Geometry`; ``Y`` of fewer eigenvectors is its top-left block, so
     one face scan serves every map size."""
@@ -107,7 +107,7 @@ def _orient_ops(evecs, geom, d):
     O^q[a, b] = Σ_t (|t|/3) (Σ_c φ_a(t_c)) Σ_{c,c'} d_q(t_c) K_t[c, c'] φ_b(t_c'), which is linear
     in d: gather Y[v, a, b] = Σ_{corners (t, c) at v} (|t|/3) s_a(t) (K_t φ_b(t))_c once (a scan
     over face blocks, `_orient_basis`; or the top-left block of a shared
-    [`OrientationBasis`][bsfjax.OrientationBasis]), then O = dᵀ Y is one GEMM ``(p, n) @ (n, k²)``.
+    `OrientationBasis`), then O = dᵀ Y is one GEMM ``(p, n) @ (n, k²)``.
     """
     n, k = evecs.shape
     Y = geom.Y[:, :k, :k] if isinstance(geom, OrientationBasis) else _orient_basis(evecs, geom)
@@ -130,10 +130,12 @@ def orientation_bases(source_spectrum: Spectrum, target_spectrum: Spectrum, sour
     - ``source_spectrum``, ``target_spectrum``: the spectra the estimates will get (as
       [`estimate_fmap`][bsfjax.estimate_fmap] does, they are put at one area first, so the bases match its).
     - ``source_mesh``, ``target_mesh``: their meshes.
-    - ``k``: eigenvectors of each basis, the largest map size the estimates use (a smaller
+    - `k`: eigenvectors of each basis, the largest map size the estimates use (a smaller
       one takes the top-left block).
 
-    **Returns:** ``(source basis, target basis)``, each ``Y`` ``(n, k, k)``: ``n k²`` floats.
+    **Returns:**
+
+    ``(source basis, target basis)``, each ``Y`` ``(n, k, k)``: ``n k²`` floats.
     """
     dt = jnp.result_type(float)
     source_spectrum, _, target_spectrum, _ = unit_area_pair(source_spectrum, target_spectrum)

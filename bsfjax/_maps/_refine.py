@@ -22,7 +22,8 @@ With samples ([`bsfjax.subsample`][bsfjax.subsample]) the steps whose maps are n
 [`bsfjax.zoomout`][bsfjax.zoomout] does: ``T_t`` maps the target samples to source samples and
 ``C_{t+1} = Φ_N[S]ᵀ diag(w) Φ_M[T_t(S)]`` with ``w`` the areas of the target's sample cells.
 
-Measured (``docs/results.md``, "Real segmentations"; SMPL parts, 9 FAUST / FAUST_5k pairs):
+Measured (``docs/results/segmentation.md``, "Real segmentations"; SMPL parts, 9 FAUST / FAUST_5k
+pairs):
 the last map alone, the steps before it on the map's 2000 samples per shape (the default of
 ``"refined"``): +0.65 points of area accuracy over the pull-back of the CLI's estimated map on
 average (−0.03 … +1.17), +4.1 with a crude k = 20 map; the vote of the last three maps on every
@@ -197,13 +198,13 @@ def refine_point_maps(source: Spectrum, target: Spectrum, p2p, *, k_start: int =
     **Arguments:**
 
     - ``source``, ``target``: spectra; ``k_max`` (default: the smaller size) eigenpairs used.
-    - ``p2p``: ``(n_N,)`` point map target vertex → source vertex to start from.
+    - `p2p`: ``(n_N,)`` point map target vertex → source vertex to start from.
     - ``k_start``, ``step``: the first basis size (clipped to ``k_max``) and the growth per
       iteration.
-    - ``n_keep``: how many of the last point maps to return (at most one per size).
-    - ``descriptor_weight``: ``w`` above (0: plain ZoomOut from the point map).
+    - `n_keep`: how many of the last point maps to return (at most one per size).
+    - `descriptor_weight`: ``w`` above (0: plain ZoomOut from the point map).
     - ``descriptor_dims``, ``n_energies``: principal WKS dimensions kept, WKS energies.
-    - ``samples``: ``None`` (every step on every vertex) or ``(source, target)``
+    - `samples`: ``None`` (every step on every vertex) or ``(source, target)``
       [`Subsample`][bsfjax.Subsample] s ([`bsfjax.subsample`][bsfjax.subsample], as [`bsfjax.zoomout`][bsfjax.zoomout]): the
       steps whose maps are not returned then run on the samples, the last ``n_keep`` on every
       vertex.

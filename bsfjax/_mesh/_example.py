@@ -89,13 +89,14 @@ POSES: dict[str, dict[str, tuple[float, float, float]]] = {
 class ExamplePair(NamedTuple):
     """A source/target pair with exact ground truth.
 
-    Attributes:
-        source: the source shape (``"source"`` pose).
-        target: the target shape (``"target"`` pose), same faces as ``source``.
-        labels: ``(n,)`` int64 part label of every vertex, valid on both shapes.
-        label_names: name of each label (``label_names[labels[i]]``).
-        p2p: ``(n,)`` int64 ground-truth map, ``p2p[i]`` = source vertex matched to target
-            vertex ``i`` (the identity here).
+    **Attributes:**
+
+    - `source`: the source shape (``"source"`` pose).
+    - `target`: the target shape (``"target"`` pose), same faces as ``source``.
+    - `labels`: ``(n,)`` int64 part label of every vertex, valid on both shapes.
+    - `label_names`: name of each label (``label_names[labels[i]]``).
+    - `p2p`: ``(n,)`` int64 ground-truth map, ``p2p[i]`` = source vertex matched to target
+      vertex ``i`` (the identity here).
     """
 
     source: Mesh
@@ -345,16 +346,18 @@ def example_mesh(pose: str | Mapping[str, tuple[float, float, float]] = "source"
                  levels: int = 3) -> Mesh:
     """One pose of the built-in body.
 
-    Args:
-        pose: ``"rest"`` (arms out sideways), ``"source"`` or ``"target"`` (see `POSES`),
-            or a mapping joint name (`JOINTS`) -> rotation vector ``(rx, ry, rz)`` in
-            degrees in the rest frame (axis × angle; joints not given stay straight).  Every
-            pose has the same faces, so any two are in vertex-to-vertex correspondence.
-        levels: Catmull–Clark levels; the mesh has ``126 · 4^levels + 2`` vertices
-            (``levels=2``: 2018, ``3``: 8066, ``4``: 32258).
+    **Arguments:**
 
-    Returns:
-        A closed, genus-0 triangle [`Mesh`][bsfjax.Mesh] named ``"example:<pose>"``.
+    - `pose`: ``"rest"`` (arms out sideways), ``"source"`` or ``"target"`` (see `POSES`),
+      or a mapping joint name (`JOINTS`) -> rotation vector ``(rx, ry, rz)`` in
+      degrees in the rest frame (axis × angle; joints not given stay straight).  Every
+      pose has the same faces, so any two are in vertex-to-vertex correspondence.
+    - `levels`: Catmull–Clark levels; the mesh has ``126 · 4^levels + 2`` vertices
+      (``levels=2``: 2018, ``3``: 8066, ``4``: 32258).
+
+    **Returns:**
+
+    A closed, genus-0 triangle [`Mesh`][bsfjax.Mesh] named ``"example:<pose>"``.
     """
     p = _validate_pose(pose)
     (v,), tris, _ = _build([p], levels)
@@ -364,13 +367,15 @@ def example_mesh(pose: str | Mapping[str, tuple[float, float, float]] = "source"
 def example_pair(levels: int = 3, *, source_pose="source", target_pose="target") -> ExamplePair:
     """A source/target pair of body shapes in different poses, with exact ground truth.
 
-    Args:
-        levels: Catmull–Clark levels (size: ``126 · 4^levels + 2`` vertices; default 8066).
-        source_pose, target_pose: poses as in [`example_mesh`][bsfjax.example_mesh].
+    **Arguments:**
 
-    Returns:
-        [`ExamplePair`][bsfjax.ExamplePair] with the two meshes (identical faces), the six-part segmentation
-        ``labels`` (``label_names`` = `LABEL_NAMES`) and ``p2p = arange(n)``.
+    - `levels`: Catmull–Clark levels (size: ``126 · 4^levels + 2`` vertices; default 8066).
+    - `source_pose`, `target_pose`: poses as in [`example_mesh`][bsfjax.example_mesh].
+
+    **Returns:**
+
+    [`ExamplePair`][bsfjax.ExamplePair] with the two meshes (identical faces), the six-part segmentation
+    ``labels`` (``label_names`` = `LABEL_NAMES`) and ``p2p = arange(n)``.
 
     The deformation is near-isometric (edge lengths change only near the bent joints) yet far
     from rigid.  Deterministic; builds in a few tens of milliseconds.

@@ -8,7 +8,7 @@
 * ``.txt`` / ``.npy``: one non-negative integer per vertex (no names: a label is its own
   name, and an id of 10¹² allocates nothing).
 * ``.seg``: one non-negative integer per *triangle*, the form of the Princeton Segmentation
-  Benchmark and COSEG ([`is_face_file`][bsfjax.is_face_file]; transferred with
+  Benchmark and COSEG (`is_face_file`; transferred with
   [`bsfjax.transfer_face_labels`][bsfjax.transfer_face_labels]).  A ``.txt`` / ``.npy`` file with one label per
   triangle is read the same way; which one it is, only the mesh tells.
 
@@ -57,11 +57,13 @@ def load_labels(path: str | os.PathLike) -> LabelFile:
 
     **Arguments:**
 
-    - ``path``: a ``.json`` ``{part name: [vertex indices]}`` file, a ``.txt`` / ``.npy``
+    - `path`: a ``.json`` ``{part name: [vertex indices]}`` file, a ``.txt`` / ``.npy``
       file of one non-negative integer label per vertex, or a ``.seg`` file of one per
       triangle.
 
-    **Returns:** [`LabelFile`][bsfjax.LabelFile] ``(labels (n,) int64, names)``.
+    **Returns:**
+
+    [`LabelFile`][bsfjax.LabelFile] ``(labels (n,) int64, names)``.
     """
     return read_label_file(path, "labels")
 
@@ -120,12 +122,12 @@ def save_labels(path: str | os.PathLike, labels, names=None, *, immediate: bool 
 
     **Arguments:**
 
-    - ``path``: ``.json``, ``.txt``, ``.npy`` or (labels of triangles) ``.seg``.
-    - ``labels``: ``(n,)`` integer labels, ``-1`` for unassigned vertices (or triangles).
-    - ``names``: the name of each label (``.json``; default ``"0"``, ``"1"``, …).  Every name
+    - `path`: ``.json``, ``.txt``, ``.npy`` or (labels of triangles) ``.seg``.
+    - `labels`: ``(n,)`` integer labels, ``-1`` for unassigned vertices (or triangles).
+    - `names`: the name of each label (``.json``; default ``"0"``, ``"1"``, …).  Every name
       is written, a part with no vertex as an empty list, so a transferred segmentation keeps
       its source's parts; unassigned vertices go under `UNASSIGNED_PART`.
-    - ``immediate``: put the file in place at once even inside an output transaction
+    - `immediate`: put the file in place at once even inside an output transaction
       (``bsfjax transfer --out-dir`` keeps each target's file as it finishes).
     """
     path = Path(path)

@@ -44,7 +44,7 @@ def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = Non
     segmentation or an error map).  PLY keeps them as vertex properties that MeshLab shows;
     ``red``/``green``/``blue`` uint8 arrays become vertex colours.  ``cell_data``: the same per
     triangle (``n_faces`` rows; PLY files only), e.g. a segmentation given per triangle and its
-    face colours.  ``immediate``: as `bsfjax._files.atomic_path` (in place at once, even
+    face colours.  ``immediate``: as `bsfjax._util._files.atomic_path` (in place at once, even
     inside an output transaction).
     """
     import meshio

@@ -11,7 +11,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._util import BSFError
-from ._mesh import Mesh, mesh_edges
+from ._graph import mesh_edges
+from ._mesh import Mesh
 
 __all__ = ["subdivide"]
 

@@ -67,19 +67,21 @@ def random_indicators(mesh: Mesh, count: int, seed: int = 0, area_fraction=(0.05
     module doc) whose area reaches ``s_r · Σ A``.  So each region is connected and its area
     share lies in ``[s_r, s_r + max_i A_i / Σ A]``.
 
-    Args:
-        mesh: the shape ([`Mesh`][bsfjax.Mesh]); must be connected for regions to reach large
-            shares (growth stops at the seed's component).
-        count: number of regions (≥ 1).
-        seed: non-negative int; same seed, same regions.
-        area_fraction: ``(lo, hi)`` with ``0 < lo ≤ hi ≤ 1`` (paper: 5–25 %).
-        mass: ``(n,)`` vertex areas (default: the mixed-Voronoi mass of
-            [`bsfjax.laplacian`][bsfjax.laplacian], the same as ``bsfjax.spectrum(mesh, k).mass``).
-        irregularity: log-normal spread of the random edge-length factors; ``0`` grows
-            graph-geodesic discs.
+    **Arguments:**
 
-    Returns:
-        ``(count, n)`` float64 numpy array.
+    - `mesh`: the shape ([`Mesh`][bsfjax.Mesh]); must be connected for regions to reach large
+      shares (growth stops at the seed's component).
+    - `count`: number of regions (≥ 1).
+    - `seed`: non-negative int; same seed, same regions.
+    - `area_fraction`: ``(lo, hi)`` with ``0 < lo ≤ hi ≤ 1`` (paper: 5–25 %).
+    - `mass`: ``(n,)`` vertex areas (default: the mixed-Voronoi mass of
+      [`bsfjax.laplacian`][bsfjax.laplacian], the same as ``bsfjax.spectrum(mesh, k).mass``).
+    - `irregularity`: log-normal spread of the random edge-length factors; ``0`` grows
+      graph-geodesic discs.
+
+    **Returns:**
+
+    ``(count, n)`` float64 numpy array.
     """
     if not isinstance(mesh, Mesh):
         raise BSFError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
@@ -120,12 +122,14 @@ def labels_to_indicators(labels, n_labels: int | None = None) -> jax.Array:
     Row ``l`` is ``χ_{labels = l}``, so a step function with piece values ``a`` ``(L,)`` is
     ``a @ labels_to_indicators(labels)`` (paper Eq. 2).
 
-    Args:
-        labels: ``(..., n)`` non-negative integer labels.
-        n_labels: ``L`` (static); default ``max(labels) + 1`` (needs concrete labels).
+    **Arguments:**
 
-    Returns:
-        ``(..., L, n)`` in JAX's default float dtype; works under ``jit`` given ``n_labels``.
+    - `labels`: ``(..., n)`` non-negative integer labels.
+    - `n_labels`: ``L`` (static); default ``max(labels) + 1`` (needs concrete labels).
+
+    **Returns:**
+
+    ``(..., L, n)`` in JAX's default float dtype; works under ``jit`` given ``n_labels``.
     """
     traced = isinstance(labels, jax.core.Tracer)
     if not traced:
@@ -160,12 +164,14 @@ def labels_to_indicators(labels, n_labels: int | None = None) -> jax.Array:
 def indicators_to_labels(indicators) -> jax.Array:
     """Labels from (possibly soft, transferred) indicators: arg-max over pieces.
 
-    Args:
-        indicators: ``(..., L, n)``, row ``l`` the (approximate) indicator of piece ``l``.
+    **Arguments:**
 
-    Returns:
-        ``(..., n)`` int32, ``argmax_l indicators[..., l, i]`` (ties: the smallest label).
-        Inverse of [`labels_to_indicators`][bsfjax.labels_to_indicators] on exact indicators.
+    - `indicators`: ``(..., L, n)``, row ``l`` the (approximate) indicator of piece ``l``.
+
+    **Returns:**
+
+    ``(..., n)`` int32, ``argmax_l indicators[..., l, i]`` (ties: the smallest label).
+    Inverse of [`labels_to_indicators`][bsfjax.labels_to_indicators] on exact indicators.
     """
     if not isinstance(indicators, jax.core.Tracer):
         if not hasattr(indicators, "shape"):

@@ -82,25 +82,28 @@ def relative_error(reference, estimate, mass) -> jax.Array:
     .. math::  E = \sqrt{\textstyle\sum_i A_i (f_i - \tilde f_i)^2} \big/
                \sqrt{\textstyle\sum_i A_i f_i^2}
 
-    Args:
-        reference: ``(..., n)`` the true functions ``f`` (for a transfer: ``f ∘ T`` on the
-            target).
-        estimate: ``(..., n)`` the approximations / transferred functions ``f̃``; broadcasts
-            against ``reference``.
-        mass: ``(n,)`` (or broadcastable ``(..., n)``) vertex areas ``A_i ≥ 0`` of the shape the
-            functions live on (``Spectrum.mass``).
+    **Arguments:**
 
-    Returns:
-        ``(...)`` errors, one per function, in the promoted float dtype.  It is the **square
-        root** of the ratio of integrals (square it for the paper's ratio form).  Zero-norm
-        rule: where ``‖f‖_A = 0`` the result is the absolute error ``‖f̃‖_A`` (so ``0`` when both
-        vanish), never NaN or inf.  ``f`` counts as zero when it is below the working dtype's
-        smallest normal number relative to ``max(|f|, |f̃|)`` (1e-38 in float32: ``f = 1e-205``
-        beside ``f̃ = 1``); a ratio beyond the dtype's range is its largest value.
+    - `reference`: ``(..., n)`` the true functions ``f`` (for a transfer: ``f ∘ T`` on the
+      target).
+    - `estimate`: ``(..., n)`` the approximations / transferred functions ``f̃``; broadcasts
+      against ``reference``.
+    - `mass`: ``(n,)`` (or broadcastable ``(..., n)``) vertex areas ``A_i ≥ 0`` of the shape the
+      functions live on (``Spectrum.mass``).
 
-    Raises:
-        BSFError: non-numeric / non-finite inputs, mismatched last axes, negative or all-zero
-            mass (checked before tracing when the inputs are concrete).
+    **Returns:**
+
+    ``(...)`` errors, one per function, in the promoted float dtype.  It is the **square
+    root** of the ratio of integrals (square it for the paper's ratio form).  Zero-norm
+    rule: where ``‖f‖_A = 0`` the result is the absolute error ``‖f̃‖_A`` (so ``0`` when both
+    vanish), never NaN or inf.  ``f`` counts as zero when it is below the working dtype's
+    smallest normal number relative to ``max(|f|, |f̃|)`` (1e-38 in float32: ``f = 1e-205``
+    beside ``f̃ = 1``); a ratio beyond the dtype's range is its largest value.
+
+    **Raises:**
+
+    - `BSFError`: non-numeric / non-finite inputs, mismatched last axes, negative or all-zero
+      mass (checked before tracing when the inputs are concrete).
 
     Works under ``jit`` / ``vmap`` with traced inputs (value checks are then skipped).
     """
@@ -124,7 +127,7 @@ def relative_error(reference, estimate, mass) -> jax.Array:
     if any(isinstance(x, jax.core.Tracer) for x in (reference, estimate, mass)):
         return _relative_error(reference, estimate, mass)
     # concrete inputs: the unit-scale rescaling of _relative_error done first, on the host in
-    # float64, so float64 values beyond the float32 range survive the cast (issue 18)
+    # float64, so float64 values beyond the float32 range survive the cast
     dt = jax.dtypes.canonicalize_dtype(np.result_type(reference.dtype, estimate.dtype,
                                                       mass.dtype, np.float32))
     f, e, w = (np.asarray(x, np.float64) for x in (reference, estimate, mass))

@@ -1,4 +1,10 @@
-"""Mesh-level entry points: values and labels from one mesh to another, per vertex or per triangle, and collections of targets."""
+"""Mesh-level entry points: from one mesh to another, or to many.
+
+`transfer_values` and `transfer_labels` (per vertex: each label's indicator is transferred and
+the target takes the arg-max), `transfer_face_labels` (labels given per triangle), and
+`transfer_collection` (one source to many targets in size buckets, batched and sharded, with
+the batched stages of map estimation and transfer).
+"""
 
 from ._collection import TargetTransfer, process_share, size_bucket, transfer_collection
 from ._face_labels import (

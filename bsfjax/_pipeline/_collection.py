@@ -6,11 +6,11 @@ WKS), the functional map of [`bsfjax.estimate_fmap`][bsfjax.estimate_fmap] (orie
 landmarks), ZoomOut, its point map, and the method's transfer through the one engine
 (``method.prepare`` / ``carry``) — but with the source prepared once and the targets run
 through **three jitted stages** per group of equal shapes (the estimation problem, the map,
-the transfer; `bsfjax._collection_stages`).  A target **without landmarks** gets
+the transfer; `bsfjax._pipeline._stages`).  A target **without landmarks** gets
 [`bsfjax.estimate_map`][bsfjax.estimate_map]'s own point map, computed on the host with the target's other host
 work: its choice among several starts by geodesic distortion and orientation is Dijkstra and
 numpy, not a jitted stage; the problem stage (for the map's energy) and the transfer stage then
-run on it as for any other target.  With ``starts=((k, WKS_VARIANCE),)`` (``bsfjax transfer
+run on it as for any other target.  With the single start ``starts=((k, wks_variance),)`` (``bsfjax transfer
 --one-start``) such a target runs through the three stages like the others.
 
 - **size buckets**: a target of ``n`` vertices (``m`` faces) is padded to the bucket size
@@ -31,13 +31,14 @@ run on it as for any other target.  With ``starts=((k, WKS_VARIANCE),)`` (``bsfj
 
 The eigensolve of each target stays on the host (scipy), as in the single-pair path, and runs
 while the group dispatched before it computes.  On a CPU the two share the cores: the stages'
-BLAS calls run on one thread (`bsfjax._threads`), as does the eigensolve of a target below
-``ONE_THREAD_BELOW`` vertices (a larger one waits for the group).  Eight 5K targets, stop 30:
+BLAS calls run on one thread (`bsfjax._util._threads`), as does the eigensolve of a target below
+``ONE_THREAD_BELOW`` vertices (a larger one waits for the group).  Eight 5K targets:
 0.47–0.52 s per target against 0.62–0.67 s one after the other (docs/benchmarks.md).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import NamedTuple
@@ -52,7 +53,7 @@ from .._util import BSFError
 from .._maps import face_geometry
 from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
-from .._maps import LANDMARK_FREE_STARTS, WKS_VARIANCE, ZOOMOUT_SAMPLES, check_landmark_pairs, check_starts, estimate_map, mirror_symmetry
+from .._maps import MapEstimator, check_landmark_pairs, check_starts
 from ._face_labels import decide_face_labels, face_label_shares
 from .._metrics import labels_to_indicators
 from .._mesh import Mesh, load_mesh
@@ -65,6 +66,7 @@ from .._util import check_int, compact_labels
 
 __all__ = ["transfer_collection", "TargetTransfer", "size_bucket", "BUCKET_FACTORS"]
 
+_DEFAULT = MapEstimator()
 #: Collections of at most this many targets are read once ahead for their sizes,
 #: so that buckets with few targets merge into larger ones (`merge_buckets`).
 _SCAN_LIMIT = 64
@@ -107,7 +109,7 @@ class _Target(NamedTuple):
     landmarks: tuple | None
     samples: Subsample | None  # ZoomOut's
     seconds: float
-    p2p: np.ndarray | None = None  # without landmarks: estimate_map's, chosen among starts
+    p2p: np.ndarray | None = None  # without landmarks: the estimator's, chosen among starts
     turn_doubtful: bool | None = None  # and its MapEstimate.turn_doubtful
 
 
@@ -209,11 +211,12 @@ def process_share(indices: Sequence[int]) -> list[int]:
 def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels: bool = True,
                         method="refined", k: int = 30, landmarks=None,
                         threshold: float | None = None, pad: bool = True,
-                        n_energies: int = 100, n_bsf: float | int = 0.05, seed: int = 0,
-                        zoomout_samples: int | None = ZOOMOUT_SAMPLES,
+                        n_energies: int = _DEFAULT.n_energies, n_bsf: float | int = 0.05,
+                        seed: int = 0, zoomout_samples: int | None = _DEFAULT.zoomout_samples,
                         spectrum_cache: str | None = None,
                         errors: str = "raise", batch: int = 1, starts=None,
-                        faces: bool = False) -> Iterator[tuple[int, TargetTransfer | Exception]]:
+                        faces: bool = False,
+                        estimator: MapEstimator | None = None) -> Iterator[tuple[int, TargetTransfer | Exception]]:
     """Transfer one segmentation (or functions) from ``source`` to every mesh of ``targets``.
 
     Yields ``(index, result)`` as batches finish (grouped by size bucket, so not in order);
@@ -224,36 +227,42 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     **Arguments:**
 
-    - ``source``: the source [`Mesh`][bsfjax.Mesh] or its file.
-    - ``values``: ``(n_M,)`` int labels (``labels=True``) or ``(m, n_M)`` functions.
-    - ``faces``: ``values`` are ``(m_M,)`` labels of the source's triangles, carried as
+    - `source`: the source [`Mesh`][bsfjax.Mesh] or its file.
+    - `values`: ``(n_M,)`` int labels (``labels=True``) or ``(m, n_M)`` functions.
+    - `faces`: ``values`` are ``(m_M,)`` labels of the source's triangles, carried as
       [`bsfjax.transfer_face_labels`][bsfjax.transfer_face_labels] does (each label's share of the vertices' stars);
       each result's ``labels`` are then per target triangle, its ``unassigned_share`` and
       ``agreement`` weighted by triangle area (``confidence`` ``None``), its ``values`` the
       transferred shares at the vertices.
-    - ``targets``: meshes or mesh files (loaded one at a time; a collection may be larger than
+    - `targets`: meshes or mesh files (loaded one at a time; a collection may be larger than
       memory).
-    - ``method``: as [`bsfjax.transfer_labels`][bsfjax.transfer_labels] (default ``"refined"``; the spectra then
+    - `method`: as [`bsfjax.transfer_labels`][bsfjax.transfer_labels] (default ``"refined"``; the spectra then
       have 100 eigenpairs, else ``2k``); ``"std2"`` is not supported here.
-    - ``landmarks``: ``None``, or a callable ``index → (source indices, target indices) or
+    - `landmarks`: ``None``, or a callable ``index → (source indices, target indices) or
       None``, or a sequence with one such entry per target.
-    - ``threshold``: as [`bsfjax.transfer_labels`][bsfjax.transfer_labels].
-    - ``zoomout_samples``: as [`bsfjax.estimate_map`][bsfjax.estimate_map] (ZoomOut on this many
+    - `threshold`: as [`bsfjax.transfer_labels`][bsfjax.transfer_labels].
+    - `zoomout_samples`: as [`bsfjax.estimate_map`][bsfjax.estimate_map] (ZoomOut on this many
       farthest-point samples per shape; ``None``: every vertex).
-    - ``starts``: as [`bsfjax.estimate_map`][bsfjax.estimate_map], for the targets without landmarks: by
+    - `starts`: as [`bsfjax.estimate_map`][bsfjax.estimate_map], for the targets without landmarks: by
       default its several starts, each target's map then estimated by
       [`bsfjax.estimate_map`][bsfjax.estimate_map] on the host with its turn check (accurate, about 7 s for a
       FAUST-sized target on two cores, compiled per vertex count; the source's
-      [`bsfjax.mirror_symmetry`][bsfjax.mirror_symmetry] once for all); ``((k, WKS_VARIANCE),)``, a single start,
+      [`bsfjax.mirror_symmetry`][bsfjax.mirror_symmetry] once for all); ``((k, wks_variance),)``, a single start,
       runs them through the batched stages with the others (about 17× faster, and less
-      accurate: docs/results.md, "Without landmarks").
-    - ``pad``: pad vertex and face counts to [`size_bucket`][bsfjax.size_bucket] sizes, merged for a
+      accurate: docs/results/segmentation.md, "Without landmarks").
+    - `estimator`: the [`MapEstimator`][bsfjax.MapEstimator] of the maps (default: one with
+      ``n_energies``, ``zoomout_samples`` and ``starts`` above, its other fields at their
+      defaults); its ``k`` and ``refine_to`` are replaced by ``k`` and ``2k``.  Given, it
+      holds ``n_energies``, ``zoomout_samples`` and ``starts``: leave those arguments out.
+      The batched stages follow its ``wks_variance``, ``orient_weight`` and
+      ``zoomout_step``, the targets without landmarks (several starts) all of it.
+    - `pad`: pad vertex and face counts to `size_bucket` sizes, merged for a
       collection of at most 64 targets (module doc; ``False``: one compilation per distinct
       count).
-    - ``spectrum_cache``: folder for the spectra (see [`bsfjax.spectrum`][bsfjax.spectrum]).
-    - ``errors``: ``"raise"``, or ``"report"``: a target that cannot be read or solved yields
+    - `spectrum_cache`: folder for the spectra (see [`bsfjax.spectrum`][bsfjax.spectrum]).
+    - `errors`: ``"raise"``, or ``"report"``: a target that cannot be read or solved yields
       its exception and the others go on.
-    - ``batch``: targets per device and dispatch, run as one program batched under
+    - `batch`: targets per device and dispatch, run as one program batched under
       `jax.vmap` (a group of the same size bucket; a short group is filled with copies of
       its last target, so results do not depend on the grouping: equal to ``batch=1`` up to
       float round-off, the same point maps and labels on the tested targets).  On a CPU this
@@ -294,6 +303,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                            f"n_source = {n_m}, got {vals.shape}")
     _, _, threshold, refined = _split_label_kwargs(method, threshold, {})
     k_map = 2 * k
+    estimator = _collection_estimator(estimator, k, k_map, n_energies, zoomout_samples, starts)
+    n_energies, zoomout_samples = estimator.n_energies, estimator.zoomout_samples
     k_spec = max(k_map, REFINE_EIGENPAIRS) if getattr(method, "full_spectra", False) else k_map
     if k_spec >= n_m:
         raise BSFError(f"the source has {n_m} vertices: too few for {k_spec} eigenpairs")
@@ -321,16 +332,17 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         rep["zo_cells"] = sub_m.cells
         zo_chunk = default_chunk(sub_m.indices.size)
     lm_of = _landmark_lookup(landmarks)
-    # one start, the batched stages' own: (k, WKS_VARIANCE) with the orientation term
-    one_start = check_starts(starts, k_map, ((k, WKS_VARIANCE),), LANDMARK_FREE_STARTS) \
-        == ((k, WKS_VARIANCE),)
+    # one start, the batched stages' own: (k, wks_variance) with the orientation term
+    single = (k, estimator.wks_variance)
+    one_start = check_starts(estimator.starts, k_map, (single,),
+                             estimator.landmark_free_starts) == (single,)
     pending: dict[tuple, list[_Target]] = {}
-    symmetry = []  # the source's mirror symmetry, for estimate_map's turn check: computed once
+    symmetry = []  # the source's mirror symmetry, for the estimator's turn check: computed once
 
     def source_symmetry():
         if not symmetry:
-            symmetry.append(mirror_symmetry(src_spec.truncate(k_map), source, k=k,
-                                            refine_to=k_map, samples=sub_m))
+            symmetry.append(estimator.mirror_symmetry(src_spec.truncate(k_map), source,
+                                                      samples=sub_m))
         return symmetry[0]
 
     def prepare(i, mesh: Mesh, t: float) -> _Target:
@@ -343,11 +355,10 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
         est = None
-        if lm is None and not one_start:  # the choice among starts: estimate_map's own map
-            est = estimate_map(src_spec.truncate(k_map), spec.truncate(k_map), k=k,
-                               refine_to=k_map, source_mesh=source, target_mesh=mesh,
-                               zoomout_samples=None if sub is None else (sub_m, sub),
-                               starts=starts, source_symmetry=source_symmetry())
+        if lm is None and not one_start:  # the choice among starts: the estimator's own map
+            est = estimator(src_spec.truncate(k_map), spec.truncate(k_map), source_mesh=source,
+                            target_mesh=mesh, samples=None if sub is None else (sub_m, sub),
+                            source_symmetry=source_symmetry())
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
                        None if est is None else est.turn_doubtful)
@@ -372,7 +383,9 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     def launch(key, group: list[_Target]):
         """Dispatch a group (not awaited: the next target's eigensolve runs meanwhile)."""
         n_b, m_b, p, s_b = key
-        cfg = StageConfig(method, k, k_map, k_spec, n_energies, p, chunk, zo_chunk)
+        cfg = StageConfig(method, k, k_map, k_spec, n_energies, p, chunk, zo_chunk,
+                          estimator.wks_variance, estimator.orient_weight,
+                          estimator.zoomout_step)
         if p not in on_device:
             src_arrays = _cast_tree(dict(rep, **(rep_orient if p == 0 else {})))
             on_device[p] = [jax.device_put(src_arrays, dev) for dev in devices]
@@ -456,6 +469,23 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         in_flight = launched
     if in_flight is not None:
         yield from finish(in_flight)
+
+
+def _collection_estimator(estimator, k: int, k_map: int, n_energies, zoomout_samples,
+                          starts) -> MapEstimator:
+    """The collection's [`MapEstimator`][bsfjax.MapEstimator] at ``k`` and ZoomOut to ``k_map``
+    (`transfer_collection`'s ``estimator`` argument)."""
+    if estimator is None:
+        return MapEstimator(k=k, refine_to=k_map, n_energies=n_energies,
+                            zoomout_samples=zoomout_samples, starts=starts)
+    if not isinstance(estimator, MapEstimator):
+        raise BSFError(f"estimator must be a bsfjax.MapEstimator, got "
+                       f"{type(estimator).__name__}")
+    if (n_energies, zoomout_samples, starts) != (_DEFAULT.n_energies,
+                                                 _DEFAULT.zoomout_samples, _DEFAULT.starts):
+        raise BSFError("with an estimator, give n_energies, zoomout_samples and starts as its "
+                       "fields")
+    return dataclasses.replace(estimator, k=k, refine_to=k_map)
 
 
 def _landmark_lookup(landmarks) -> Callable[[int], tuple | None]:

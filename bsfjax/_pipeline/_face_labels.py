@@ -39,7 +39,7 @@ __all__ = ["FaceShares", "face_label_shares", "face_scores", "transfer_face_labe
 
 
 class FaceShares(NamedTuple):
-    """Vertex shares of a face labelling ([`face_label_shares`][bsfjax.face_label_shares])."""
+    """Vertex shares of a face labelling (`face_label_shares`)."""
 
     ids: np.ndarray  # (L,) the labels present, in increasing order
     shares: np.ndarray  # (L, n) share of label ids[i] in each vertex's star; columns sum to 1
@@ -64,10 +64,12 @@ def face_label_shares(mesh: Mesh, face_labels: Int[ArrayLike, " m"]) -> FaceShar
 
     **Arguments:**
 
-    - ``mesh``: the labelled mesh.
-    - ``face_labels``: ``(m,)`` non-negative integer label of each triangle.
+    - `mesh`: the labelled mesh.
+    - `face_labels`: ``(m,)`` non-negative integer label of each triangle.
 
-    **Returns:** [`FaceShares`][bsfjax.FaceShares] ``(ids, shares)``: ``shares[i, v]`` is the area share of
+    **Returns:**
+
+    `FaceShares` ``(ids, shares)``: ``shares[i, v]`` is the area share of
     the triangles around ``v`` labelled ``ids[i]``.  Around a vertex whose triangles all have
     zero area the triangles count equally; a vertex in no triangle has no share.
     """
@@ -108,19 +110,21 @@ def face_scores(mesh: Mesh, vertex_scores: ArrayLike) -> np.ndarray:
 def transfer_face_labels(source: Spectrum, target: Spectrum, face_labels: Int[ArrayLike, " m_M"],
                          *, source_mesh: Mesh, target_mesh: Mesh, method="refined",
                          threshold: float | None = None, **kwargs) -> LabelTransfer:
-    """Transfer a segmentation given per face: [`face_label_shares`][bsfjax.face_label_shares] on the source, each
+    """Transfer a segmentation given per face: `face_label_shares` on the source, each
     share transferred as a vertex function, and on the target every face takes the label its
-    corners score highest ([`face_scores`][bsfjax.face_scores]).
+    corners score highest (`face_scores`).
 
     **Arguments:**
 
     - ``source``, ``target``: the two spectra (of ``source_mesh`` and ``target_mesh``).
-    - ``face_labels``: ``(m_M,)`` non-negative integer label of each source triangle.
+    - `face_labels`: ``(m_M,)`` non-negative integer label of each source triangle.
     - ``source_mesh``, ``target_mesh``: the two meshes (their triangles and areas).
     - ``method``, ``threshold``, ``**kwargs``: as [`bsfjax.transfer_labels`][bsfjax.transfer_labels] (default
       ``"refined"``; ``C``, ``p2p``, ``samples``, …; the source mesh is passed on as ``mesh``).
 
-    **Returns:** [`bsfjax.LabelTransfer`][bsfjax.LabelTransfer] over the *target's faces*: ``labels`` ``(m_N,)``
+    **Returns:**
+
+    [`bsfjax.LabelTransfer`][bsfjax.LabelTransfer] over the *target's faces*: ``labels`` ``(m_N,)``
     (−1 unassigned), ``scores`` ``(L, m_N)``, and the area shares (``unassigned_share``,
     ``agreement`` with the input point map's pull-back of the same shares) weighted by
     triangle area.  ``confidence`` is ``None``: a triangle's scores are area shares, below 1

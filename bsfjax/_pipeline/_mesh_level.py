@@ -1,5 +1,5 @@
 """Mesh-to-mesh entry points: carry values or a segmentation across a map between two shapes
-(the map from [`bsfjax.estimate_map`][bsfjax.estimate_map], ``_map_estimate.py``, or the user's).  What
+(the map from [`bsfjax.estimate_map`][bsfjax.estimate_map] or the user's).  What
 ``bsfjax transfer`` and ``bsfjax demo`` run after the map.
 
 They compose the stages (spectrum → frame → coding → transfer); each step is also available
@@ -41,18 +41,18 @@ def transfer_values(source: Spectrum, target: Spectrum,
 
     **Arguments:**
 
-    - ``method``: a name of [`bsfjax.METHODS`][bsfjax.METHODS] or a method object (see
-      [`bsfjax.as_method`][bsfjax.as_method]); ``**options`` are its options with a name (e.g.
+    - `method`: a name of [`bsfjax.METHODS`][bsfjax.METHODS] or a method object (see
+      `as_method`); ``**options`` are its options with a name (e.g.
       ``sparsity=20``, ``taus="adaptive"``, ``frame_transfer="p2p"``).
-    - ``C``: ``(k_N, k)`` functional map (every method but ``"p2p"``); ``k`` defaults to its
+    - `C`: ``(k_N, k)`` functional map (every method but ``"p2p"``); ``k`` defaults to its
       column count.
-    - ``p2p``: ``(n_N,)`` point map target vertex → source vertex (``"p2p"``, and
+    - `p2p`: ``(n_N,)`` point map target vertex → source vertex (``"p2p"``, and
       ``frame_transfer="p2p"``).
-    - ``centers``: the frame centres; default ``n_bsf`` of them (a share or a count) by
+    - `centers`: the frame centres; default ``n_bsf`` of them (a share or a count) by
       farthest point sampling (``seed``) on ``mesh`` — the source [`Mesh`][bsfjax.Mesh] — or
       on the spectral embedding when no mesh is given.  With the same centres this equals
       ``decode(transfer_frame(build_frame(source, centers), C, target), encode(...))``.
-    - ``samples``: ``(source, target)`` [`Subsample`][bsfjax.Subsample] s for ``"refined"`` (e.g.
+    - `samples`: ``(source, target)`` [`Subsample`][bsfjax.Subsample] s for ``"refined"`` (e.g.
       ``estimate_map(...).samples``); ignored by the other methods.
     """
     method = as_method(method, **options)
@@ -152,10 +152,10 @@ def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, "
 
     **Arguments:**
 
-    - ``method``: default ``"refined"`` ([`RefinedPullBack`][bsfjax.RefinedPullBack]: the most accurate
+    - `method`: default ``"refined"`` ([`RefinedPullBack`][bsfjax.RefinedPullBack]: the most accurate
       from an estimated map; needs ``p2p`` or ``C`` and spectra of ~100 eigenpairs); ``"p2p"``
       for a map that is already right (a registration); the paper's BSF is ``"omp"``.
-    - ``threshold``: default 0.5 (the midpoint of an indicator's two values) and 0 for
+    - `threshold`: default 0.5 (the midpoint of an indicator's two values) and 0 for
       ``"p2p"`` and ``"refined"``, whose scores are shares (every vertex takes its plurality
       label).
     """

@@ -21,30 +21,30 @@ Views: ``"front"``, ``"back"``, ``"left"`` (the mesh's ``+x`` side; alias ``"sid
 
 Import it as a submodule (``from bsfjax import plot``); ``import bsfjax`` alone does not import
 matplotlib.
+
+This module owns the public figure functions; the renderer lives in `bsfjax._plot._scene`, the
+shared checks and panel plumbing in `bsfjax._plot._panels`.
 """
 
 from __future__ import annotations
 
-import io
-import os
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 from matplotlib import colormaps
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.cm import ScalarMappable
-from matplotlib.collections import PolyCollection
-from matplotlib.colors import (BoundaryNorm, Colormap, LinearSegmentedColormap, ListedColormap,
-                               Normalize)
+from matplotlib.colors import BoundaryNorm, LinearSegmentedColormap, ListedColormap, Normalize
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from .._util import atomic_path
 from .._util import BSFError
 from .._mesh import Mesh
+from ._panels import (
+    _GREY, _check_1d, _check_2d, _check_mesh, _cmap, _colours, _face_labels, _face_values,
+    _finish, _mesh_panels, _new_figure, _per_vertex, _value_range,
+)
+from ._scene import Scene, _views
 
 __all__ = [
-    "VIEWS",
     "plot_function",
     "plot_segmentation",
     "plot_error",
@@ -52,303 +52,6 @@ __all__ = [
     "plot_1d_atoms",
     "plot_1d_approximation",
 ]
-
-#: Named views: (azimuth, elevation) in degrees about the up axis.
-VIEWS: dict[str, tuple[float, float]] = {
-    "front": (0.0, 0.0),
-    "back": (180.0, 0.0),
-    "left": (90.0, 0.0),
-    "side": (90.0, 0.0),
-    "right": (-90.0, 0.0),
-    "top": (0.0, 90.0),
-    "bottom": (0.0, -90.0),
-    "iso": (35.0, 20.0),
-}
-
-# up axis -> (up vector, direction the "front" camera sits in)
-_UP = {
-    "z": ((0, 0, 1), (0, -1, 0)), "-z": ((0, 0, -1), (0, -1, 0)),
-    "y": ((0, 1, 0), (0, 0, 1)), "-y": ((0, -1, 0), (0, 0, 1)),
-    "x": ((1, 0, 0), (0, -1, 0)), "-x": ((-1, 0, 0), (0, -1, 0)),
-}
-_LIGHT = np.array([-0.35, 0.5, 1.0]) / np.linalg.norm([-0.35, 0.5, 1.0])  # camera coordinates
-_AMBIENT = 0.3
-_GREY = np.array([0.72, 0.72, 0.72])
-_PANEL_INCHES = 3.0
-
-
-class _Figure(Figure):
-    """A Figure on an Agg canvas that notebooks display without pyplot."""
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        FigureCanvasAgg(self)
-
-    def _repr_png_(self) -> bytes:
-        buf = io.BytesIO()
-        self.savefig(buf, format="png")
-        return buf.getvalue()
-
-
-# --------------------------------------------------------------------------------------------
-# validation helpers
-
-
-def _check_mesh(mesh) -> Mesh:
-    if not isinstance(mesh, Mesh):
-        raise BSFError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
-    return mesh
-
-
-def _per_vertex(name: str, values, mesh: Mesh, *, allow_faces: bool = False,
-                allow_2d: bool = False) -> np.ndarray:
-    a = np.asarray(values)
-    n, m = mesh.n_vertices, mesh.n_faces
-    ok_len = (n, m) if allow_faces else (n,)
-    if a.ndim == 0 or a.ndim > (2 if allow_2d else 1) or a.shape[0] not in ok_len:
-        want = f"n_vertices={n}" + (f" (or n_faces={m})" if allow_faces else "")
-        raise BSFError(f"{name} must have length {want}"
-                       f"{' and 1 or 2 dimensions' if allow_2d else ' and be 1-D'}, "
-                       f"got shape {a.shape}")
-    if not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
-        raise BSFError(f"{name} must be numeric, got dtype {a.dtype}")
-    return a
-
-
-def _float_array(name: str, values) -> np.ndarray:
-    try:
-        return np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise BSFError(f"{name} must be a numeric array, got {type(values).__name__}") from None
-
-
-def _check_1d(name: str, values, n: int | None = None) -> np.ndarray:
-    a = _float_array(name, values)
-    if a.ndim != 1 or (n is not None and a.shape[0] != n):
-        want = f"shape ({n},)" if n is not None else "1 dimension"
-        raise BSFError(f"{name} must have {want}, got {a.shape}")
-    return a
-
-
-def _check_2d(name: str, values, n: int) -> np.ndarray:
-    a = _float_array(name, values)
-    if a.ndim == 1 and a.shape[0] == n:
-        a = a[:, None]
-    if a.ndim != 2 or a.shape[0] != n or a.shape[1] == 0:
-        raise BSFError(f"{name} must have shape ({n}, k) with k >= 1, got {np.shape(values)}")
-    return a
-
-
-def _views(views) -> list[tuple[str, tuple[float, float]]]:
-    if isinstance(views, str) or (isinstance(views, tuple) and len(views) == 2
-                                  and all(isinstance(v, (int, float)) for v in views)):
-        views = [views]
-    out = []
-    for v in views:
-        if isinstance(v, str):
-            if v not in VIEWS:
-                raise BSFError(f"views: unknown view {v!r}; use one of {sorted(VIEWS)} or an "
-                               "(azimuth, elevation) pair in degrees")
-            out.append((v, VIEWS[v]))
-        else:
-            try:
-                az, el = (float(x) for x in v)
-            except (TypeError, ValueError):
-                raise BSFError("views: each view must be a name or (azimuth, elevation), "
-                               f"got {v!r}") from None
-            out.append((f"az {az:g}°, el {el:g}°", (az, el)))
-    if not out:
-        raise BSFError("views must name at least one view")
-    return out
-
-
-def _cmap(cmap) -> Colormap:
-    if isinstance(cmap, Colormap):
-        return cmap
-    try:
-        return colormaps[cmap]
-    except KeyError:
-        raise BSFError(f"cmap: unknown colormap {cmap!r}") from None
-
-
-# --------------------------------------------------------------------------------------------
-# the renderer
-
-
-def _up_frame(vertices: np.ndarray, up: str) -> np.ndarray:
-    """Rows: world -> canonical frame in which +z is up and the front camera sits at −y."""
-    if not isinstance(up, str) or up not in _UP:
-        raise BSFError(f"up must be one of {sorted(_UP)}, got {up!r}")
-    ez, front = (np.asarray(a, dtype=np.float64) for a in _UP[up])
-    ey = -front
-    ex = np.cross(ey, ez)
-    return np.stack([ex, ey, ez])
-
-
-def _camera(az: float, el: float) -> np.ndarray:
-    """Rows (right, up, towards the viewer) of a camera at azimuth/elevation, canonical frame."""
-    t, p = np.deg2rad(az), np.deg2rad(el)
-    d = np.array([np.sin(t) * np.cos(p), -np.cos(t) * np.cos(p), np.sin(p)])
-    r = np.array([np.cos(t), np.sin(t), 0.0])
-    return np.stack([r, np.cross(d, r), d])
-
-
-def _orientation(faces: np.ndarray) -> tuple[bool, bool]:
-    """(oriented, closed): every directed edge occurs once; and every edge has its twin."""
-    he = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    n = int(faces.max()) + 1
-    key = he[:, 0] * n + he[:, 1]
-    rev = he[:, 1] * n + he[:, 0]
-    if np.unique(key).size != key.size:
-        return False, False
-    return True, bool(np.isin(rev, key).all())
-
-
-class Scene:
-    """Projection of one mesh into several views (computed once per figure)."""
-
-    def __init__(self, mesh: Mesh, views, up: str):
-        v = mesh.vertices
-        self.faces = mesh.faces
-        self.frame = _up_frame(v, up)
-        self.canon = (v - v.mean(axis=0)) @ self.frame.T
-        self.views = _views(views)
-        oriented, closed = _orientation(mesh.faces)
-        self.cull = oriented and closed
-        f = mesh.faces
-        e1 = self.canon[f[:, 1]] - self.canon[f[:, 0]]
-        e2 = self.canon[f[:, 2]] - self.canon[f[:, 0]]
-        nrm = np.cross(e1, e2)
-        if self.cull:
-            # outward orientation: positive signed volume; flip the normals of inside-out meshes
-            c = self.canon[f]
-            vol = np.einsum("ij,ij->i", c[:, 0], np.cross(c[:, 1], c[:, 2])).sum()
-            if vol < 0:
-                nrm = -nrm
-        self.normals = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
-        # shading normal: the mean of the face's area-weighted vertex normals, which hides the
-        # faceting of fine meshes (a face still has one colour)
-        vn = np.stack([np.bincount(f.ravel(), np.repeat(nrm[:, c], 3), minlength=len(v))
-                       for c in range(3)], axis=1)
-        vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
-        sn = vn[f].sum(axis=1)
-        self.shading = sn / np.maximum(np.linalg.norm(sn, axis=1, keepdims=True), 1e-300)
-        if not oriented:  # neighbours' normals may point opposite ways: keep the face normals
-            self.shading = self.normals
-        self.proj = [self.canon @ _camera(*ve).T for _, ve in self.views]
-        lo = np.min([p[:, :2].min(axis=0) for p in self.proj], axis=0)
-        hi = np.max([p[:, :2].max(axis=0) for p in self.proj], axis=0)
-        self.half = 0.52 * np.max(hi - lo)  # a common scale for every panel
-
-    def draw(self, ax, k: int, face_rgb: np.ndarray, title: str | None = None):
-        _, (az, el) = self.views[k]
-        cam = _camera(az, el)
-        p = self.proj[k]
-        facing = self.normals @ cam[2]  # towards the viewer
-        keep = facing > 0 if self.cull else np.ones(len(facing), dtype=bool)
-        lam = (self.shading[keep] @ cam.T) @ _LIGHT
-        lam = np.maximum(lam, 0.0) if self.cull else np.abs(lam)  # two-sided if not culled
-        shade = _AMBIENT + (1.0 - _AMBIENT) * lam
-        f = self.faces[keep]
-        depth = p[f, 2].mean(axis=1)
-        order = np.argsort(depth, kind="stable")  # far to near
-        rgb = np.clip(face_rgb[keep][order] * shade[order, None], 0.0, 1.0)
-        tris = p[f[order]][:, :, :2]
-        # no antialiasing: triangles a pixel or two wide would blend into moire patterns and
-        # leave hairline seams; aliased fills tile the plane exactly
-        coll = PolyCollection(tris, facecolors=rgb, edgecolors="none", linewidths=0.0,
-                              antialiaseds=False)
-        ax.add_collection(coll)
-        cx, cy = 0.5 * (p[:, 0].min() + p[:, 0].max()), 0.5 * (p[:, 1].min() + p[:, 1].max())
-        ax.set_xlim(cx - self.half, cx + self.half)
-        ax.set_ylim(cy - self.half, cy + self.half)
-        ax.set_aspect("equal")
-        ax.set_axis_off()
-        if title:
-            ax.set_title(title, fontsize=9)
-        return p
-
-    def visible(self, k: int, vertex: int) -> bool:
-        """Whether some face at ``vertex`` faces the camera of view ``k``."""
-        cam = _camera(*self.views[k][1])
-        at = np.any(self.faces == vertex, axis=1)
-        return bool(np.any(self.normals[at] @ cam[2] > 0)) or not self.cull
-
-
-def _face_values(values: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """Per-face value: the face's own value, or the mean of its vertices' (NaN-propagating)."""
-    if values.shape[0] == faces.shape[0] and values.shape[0] != n_vertices:
-        return values.astype(np.float64)
-    return values.astype(np.float64)[faces].mean(axis=1)
-
-
-def _face_labels(labels: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """Per-face label: the majority label of its three vertices (the first when all differ)."""
-    if labels.shape[0] == faces.shape[0] and labels.shape[0] != n_vertices:
-        return labels
-    a, b, c = labels[faces].T
-    return np.where((a == b) | (a == c), a, np.where(b == c, b, a))
-
-
-def _new_figure(n_panels: int, figsize, dpi: float, extra_width: float = 0.0) -> Figure:
-    if figsize is None:
-        figsize = (_PANEL_INCHES * n_panels + extra_width, _PANEL_INCHES * 1.25)
-    try:
-        w, h = (float(x) for x in figsize)
-    except (TypeError, ValueError):
-        raise BSFError(f"figsize must be (width, height) in inches, got {figsize!r}") from None
-    if not (w > 0 and h > 0 and np.isfinite(w) and np.isfinite(h)):
-        raise BSFError(f"figsize must be positive, got {figsize!r}")
-    if not (np.isfinite(dpi) and dpi > 0):
-        raise BSFError(f"dpi must be positive, got {dpi!r}")
-    return _Figure(figsize=(w, h), dpi=dpi, layout="constrained")
-
-
-def _finish(fig: Figure, path) -> Figure:
-    if path is not None:
-        fmt = os.path.splitext(os.fspath(path))[1].lstrip(".").lower() or "png"
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, format=fmt, dpi=fig.dpi)
-    return fig
-
-
-def _value_range(vals: np.ndarray, vmin, vmax) -> tuple[float, float]:
-    """The colour range: the given limits, else the finite data range (a constant is centred)."""
-    finite = vals[np.isfinite(vals)]
-    lo = float(vmin) if vmin is not None else (float(finite.min()) if finite.size else 0.0)
-    hi = float(vmax) if vmax is not None else (float(finite.max()) if finite.size else 1.0)
-    if not (np.isfinite(lo) and np.isfinite(hi)) or hi < lo:
-        raise BSFError(f"vmin and vmax must be finite with vmin <= vmax, got vmin={lo}, vmax={hi}")
-    if hi == lo:
-        lo, hi = lo - 0.5, hi + 0.5
-    return lo, hi
-
-
-def _mesh_panels(mesh: Mesh, face_vals, *, views, up, cmap, norm, title, colorbar, cbar_label,
-                 figsize, dpi, path, legend=None):
-    """One panel per view of the mesh coloured by per-face values, plus colour bar / legend."""
-    scene = Scene(mesh, views, up)
-    nv = len(scene.views)
-    fig = _new_figure(nv, figsize, dpi, extra_width=0.9 if (colorbar or legend) else 0.0)
-    axes = fig.subplots(1, nv, squeeze=False)[0]
-    rgb = _colours(face_vals, cmap, norm)
-    for k, ax in enumerate(axes):
-        scene.draw(ax, k, rgb, scene.views[k][0] if nv > 1 else None)
-    if title:
-        fig.suptitle(title)
-    if colorbar:
-        sm = ScalarMappable(norm=norm, cmap=cmap)
-        fig.colorbar(sm, ax=list(axes), shrink=0.75, label=cbar_label)
-    if legend:
-        fig.legend(handles=legend, loc="outside right upper", fontsize=8, frameon=False)
-    return _finish(fig, path)
-
-
-def _colours(face_vals: np.ndarray, cmap: Colormap, norm) -> np.ndarray:
-    rgb = np.asarray(cmap(norm(np.where(np.isfinite(face_vals), face_vals, 0.0))))[:, :3]
-    rgb[~np.isfinite(face_vals)] = _GREY  # NaN: no value
-    return rgb
-
 
 # --------------------------------------------------------------------------------------------
 # mesh figures
@@ -360,17 +63,18 @@ def plot_function(mesh: Mesh, values, views=("front", "side"), *, cmap="viridis"
                   figsize=None, dpi: float = 100, path=None) -> Figure:
     """A scalar function on a mesh, flat-shaded, seen from several views.
 
-    Args:
-        mesh: the surface.
-        values: ``(n_vertices,)`` per-vertex values (a face shows the mean of its vertices) or
-            ``(n_faces,)`` per-face values.  NaN shows grey.
-        views: view names or ``(azimuth, elevation)`` pairs, one panel each.
-        cmap, vmin, vmax: colour map and its range (default: the data's finite range).
-        title, colorbar, label: figure title, whether to draw a colour bar, its label.
-        up: the world axis pointing up on screen (``"y"``, ``"z"``, ``"x"``, ``"-y"``, ...).
-        figsize, dpi: figure size in inches (default 3 × 3.75 per panel) and resolution; a saved
-            PNG is ``figsize · dpi`` pixels.
-        path: if given, the figure is also written there (atomically).
+    **Arguments:**
+
+    - `mesh`: the surface.
+    - `values`: ``(n_vertices,)`` per-vertex values (a face shows the mean of its vertices) or
+      ``(n_faces,)`` per-face values.  NaN shows grey.
+    - `views`: view names or ``(azimuth, elevation)`` pairs, one panel each.
+    - `cmap`, `vmin`, `vmax`: colour map and its range (default: the data's finite range).
+    - `title`, `colorbar`, `label`: figure title, whether to draw a colour bar, its label.
+    - `up`: the world axis pointing up on screen (``"y"``, ``"z"``, ``"x"``, ``"-y"``, ...).
+    - `figsize`, `dpi`: figure size in inches (default 3 × 3.75 per panel) and resolution; a saved
+      PNG is ``figsize · dpi`` pixels.
+    - `path`: if given, the figure is also written there (atomically).
     """
     mesh = _check_mesh(mesh)
     vals = _per_vertex("values", values, mesh, allow_faces=True).astype(np.float64)
@@ -478,12 +182,13 @@ def plot_atoms(mesh: Mesh, atoms, taus, view="front", *, center: int | None = No
                path=None) -> Figure:
     """The atoms of one centre at each scale: one panel per scale ``taus[s]``.
 
-    Args:
-        atoms: ``(n_vertices, s)`` atoms (binary: the atom's support is red, the rest grey;
-            real values are shaded from grey at 0 to red at their maximum).
-        taus: ``(s,)`` the scale of each column, shown in the panel titles.
-        view: one view for every panel.
-        center: the centre vertex, marked with a black dot where it faces the camera.
+    **Arguments:**
+
+    - `atoms`: ``(n_vertices, s)`` atoms (binary: the atom's support is red, the rest grey;
+      real values are shaded from grey at 0 to red at their maximum).
+    - `taus`: ``(s,)`` the scale of each column, shown in the panel titles.
+    - `view`: one view for every panel.
+    - `center`: the centre vertex, marked with a black dot where it faces the camera.
     """
     mesh = _check_mesh(mesh)
     B = _check_2d("atoms", atoms, mesh.n_vertices)
@@ -519,11 +224,12 @@ def plot_1d_atoms(x, fourier_basis, bsf_atoms, *, stacked: bool = True,
                   title: str | None = None, figsize=None, dpi: float = 100, path=None) -> Figure:
     """Laplacian eigenfunctions next to binary atoms on an interval (paper Fig. 1).
 
-    Args:
-        x: ``(n,)`` sample positions.
-        fourier_basis: ``(n, k)`` eigenfunctions, one curve each.
-        bsf_atoms: ``(n, q)`` atoms, drawn as steps.
-        stacked: draw each curve on its own baseline (offset upwards) instead of overlapping.
+    **Arguments:**
+
+    - `x`: ``(n,)`` sample positions.
+    - `fourier_basis`: ``(n, k)`` eigenfunctions, one curve each.
+    - `bsf_atoms`: ``(n, q)`` atoms, drawn as steps.
+    - `stacked`: draw each curve on its own baseline (offset upwards) instead of overlapping.
     """
     xs = _check_1d("x", x)
     n = xs.shape[0]
@@ -556,11 +262,12 @@ def plot_1d_approximation(x, f, approximations: Mapping[str, np.ndarray],
                           path=None) -> Figure:
     """A step function and its approximations on an interval (paper Fig. 5).
 
-    Args:
-        x: ``(n,)`` sample positions.
-        f: ``(n,)`` the function (drawn as a thick black step line).
-        approximations: name -> ``(n,)`` approximation, e.g. ``{"Fourier k=10": ..., "BSF": ...}``.
-        errors: optional name -> error, appended to the legend entries.
+    **Arguments:**
+
+    - `x`: ``(n,)`` sample positions.
+    - `f`: ``(n,)`` the function (drawn as a thick black step line).
+    - `approximations`: name -> ``(n,)`` approximation, e.g. ``{"Fourier k=10": ..., "BSF": ...}``.
+    - `errors`: optional name -> error, appended to the legend entries.
     """
     xs = _check_1d("x", x)
     n = xs.shape[0]

@@ -1,4 +1,9 @@
-"""Sampling on a mesh: farthest point sampling (the frame centres, ZoomOut samples) and geodesic distances."""
+"""Sampling on a mesh: well-spread points and distances between them.
+
+Farthest point sampling (Euclidean, geodesic by Dijkstra, or biharmonic) gives the frame's
+centres (paper: 5 % of the vertices) and ZoomOut's samples with their Voronoi cells
+(`subsample`); `geodesic_distances` and `geodesic_error` measure maps.
+"""
 
 from ._fps import Subsample, farthest_point_sampling, subsample
 from ._geodesics import geodesic_distances, geodesic_error

@@ -206,25 +206,28 @@ def farthest_point_sampling(mesh, n, metric: str = "euclidean", seed: int = 0,
                             spectrum: Spectrum | None = None) -> np.ndarray:
     """Greedy farthest point sampling of ``n`` vertices.
 
-    Args:
-        mesh: a [`Mesh`][bsfjax.Mesh], or an ``(N, d)`` array of points (a 1D interval sampled at
-            ``x`` is ``x[:, None]``).  ``"geodesic"`` needs a ``Mesh`` (its edges).
-        n: number of samples: an ``int`` in ``[1, N]``, or a ``float`` in ``(0, 1]`` meaning that
-            fraction of the ``N`` points, rounded, at least 1 (n_BSF = 5 % is ``n=0.05``).
-        metric: ``"euclidean"``, ``"geodesic"`` (edge-length Dijkstra) or ``"biharmonic"``
-            (spectral distance of the eigenpairs with λ > 0; needs ``spectrum``).
-        seed: chooses the first sample, ``x₀ = numpy.random.default_rng(seed).integers(N)``;
-            the rest is deterministic (ties go to the smallest index).  Same seed, same output.
-        spectrum: a [`Spectrum`][bsfjax.Spectrum] of the same ``N`` points, for ``"biharmonic"``.
+    **Arguments:**
 
-    Returns:
-        ``(n,)`` int64 numpy array of point indices, in the order they were picked.  They are
-        distinct unless ``n`` exceeds the number of distinct points (once the covering radius
-        reaches 0, later picks repeat earlier ones).
+    - `mesh`: a [`Mesh`][bsfjax.Mesh], or an ``(N, d)`` array of points (a 1D interval sampled at
+      ``x`` is ``x[:, None]``).  ``"geodesic"`` needs a ``Mesh`` (its edges).
+    - `n`: number of samples: an ``int`` in ``[1, N]``, or a ``float`` in ``(0, 1]`` meaning that
+      fraction of the ``N`` points, rounded, at least 1 (n_BSF = 5 % is ``n=0.05``).
+    - `metric`: ``"euclidean"``, ``"geodesic"`` (edge-length Dijkstra) or ``"biharmonic"``
+      (spectral distance of the eigenpairs with λ > 0; needs ``spectrum``).
+    - `seed`: chooses the first sample, ``x₀ = numpy.random.default_rng(seed).integers(N)``;
+      the rest is deterministic (ties go to the smallest index).  Same seed, same output.
+    - `spectrum`: a [`Spectrum`][bsfjax.Spectrum] of the same ``N`` points, for ``"biharmonic"``.
 
-    Raises:
-        BSFError: ``n`` out of range, unknown ``metric``, ``"biharmonic"`` without a matching
-            ``spectrum``, ``"geodesic"`` on bare points, a malformed ``mesh`` or ``seed``.
+    **Returns:**
+
+    ``(n,)`` int64 numpy array of point indices, in the order they were picked.  They are
+    distinct unless ``n`` exceeds the number of distinct points (once the covering radius
+    reaches 0, later picks repeat earlier ones).
+
+    **Raises:**
+
+    - `BSFError`: ``n`` out of range, unknown ``metric``, ``"biharmonic"`` without a matching
+      ``spectrum``, ``"geodesic"`` on bare points, a malformed ``mesh`` or ``seed``.
     """
     if metric not in _METRICS:
         raise BSFError(f"metric must be one of {_METRICS}, got {metric!r}")
@@ -263,10 +266,11 @@ class Subsample(NamedTuple):
     """Sample vertices of a shape and the cell of each vertex: a quadrature for integrals
     over the shape, ``∫ f ≈ Σ_s f(x_s) w_s`` with ``w_s = Σ_{v ∈ cell s} A_v``.
 
-    Attributes:
-        indices: ``(s,)`` int64 sample vertices.
-        cells: ``(n,)`` int64, for every vertex the position in ``indices`` of its nearest
-            sample (Euclidean Voronoi cell; a sample's own cell holds it).
+    **Attributes:**
+
+    - `indices`: ``(s,)`` int64 sample vertices.
+    - `cells`: ``(n,)`` int64, for every vertex the position in ``indices`` of its nearest
+      sample (Euclidean Voronoi cell; a sample's own cell holds it).
     """
 
     indices: np.ndarray
@@ -288,9 +292,9 @@ def subsample(mesh, n: int, seed: int = 0) -> Subsample:
 
     **Arguments:**
 
-    - ``mesh``: a [`Mesh`][bsfjax.Mesh] or ``(N, d)`` points.
-    - ``n``: number of samples, a positive int.
-    - ``seed``: the first sample, as in [`farthest_point_sampling`][bsfjax.farthest_point_sampling].
+    - `mesh`: a [`Mesh`][bsfjax.Mesh] or ``(N, d)`` points.
+    - `n`: number of samples, a positive int.
+    - `seed`: the first sample, as in [`farthest_point_sampling`][bsfjax.farthest_point_sampling].
     """
     import scipy.spatial
 

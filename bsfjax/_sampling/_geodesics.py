@@ -199,19 +199,21 @@ def geodesic_error(source_mesh: Mesh, p2p, gt_p2p, *, method: str = "dijkstra",
                    per_vertex: bool = False, chunk_size: int = _DEFAULT_CHUNK):
     """Mean geodesic error of point map(s) against ground truth, normalized by √area.
 
-    Args:
-        source_mesh: the mesh ``M`` that ``p2p`` maps into (distances are measured there).
-        p2p: ``(n_N,)`` source vertex matched to each target vertex, or ``(B, n_N)`` for ``B``
-            maps scored against the same ground truth (distances are computed once).
-        gt_p2p: ``(n_N,)`` ground-truth source vertex of each target vertex (the identity
-            ``arange(n)`` for FAUST registrations).
-        method: ``"dijkstra"`` or ``"heat"`` (module doc).
-        per_vertex: also return the ``(…, n_N)`` normalized errors.
-        chunk_size: ground-truth images per distance batch (memory ``chunk_size × n_M``).
+    **Arguments:**
 
-    Returns:
-        ``mean_i d_M(p2p[i], gt[i]) / √area(M)`` (a float, or ``(B,)``), and the per-vertex errors
-        when ``per_vertex``.
+    - `source_mesh`: the mesh ``M`` that ``p2p`` maps into (distances are measured there).
+    - `p2p`: ``(n_N,)`` source vertex matched to each target vertex, or ``(B, n_N)`` for ``B``
+      maps scored against the same ground truth (distances are computed once).
+    - `gt_p2p`: ``(n_N,)`` ground-truth source vertex of each target vertex (the identity
+      ``arange(n)`` for FAUST registrations).
+    - `method`: ``"dijkstra"`` or ``"heat"`` (module doc).
+    - `per_vertex`: also return the ``(…, n_N)`` normalized errors.
+    - `chunk_size`: ground-truth images per distance batch (memory ``chunk_size × n_M``).
+
+    **Returns:**
+
+    ``mean_i d_M(p2p[i], gt[i]) / √area(M)`` (a float, or ``(B,)``), and the per-vertex errors
+    when ``per_vertex``.
     """
     _check_mesh(source_mesh)
     _check_method(method)

@@ -95,17 +95,19 @@ def mass_matrix(mesh: Mesh, kind: str = "mixed") -> sp.csr_matrix:
 def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     """Cotangent stiffness ``W`` and diagonal mass ``A`` of ``mesh`` (both ``scipy.sparse``).
 
-    Args:
-        mesh: a [`Mesh`][bsfjax.Mesh].
-        mass: ``"mixed"`` (default; mixed Voronoi, Meyer et al. 2003, libigl's default for
-            triangles) or ``"barycentric"``.  Mixed Voronoi areas are the consistent dual areas
-            of the cotangent operator on well-shaped meshes and stay positive on obtuse ones.
-        robust: use the intrinsic-Delaunay "robust" Laplacian of Sharp & Crane 2020
-            (``pip install robust-laplacian``), for non-manifold or badly triangulated meshes.
-            Its mass is the lumped intrinsic Voronoi area.
+    **Arguments:**
 
-    Returns:
-        ``(W, A)``: ``W`` symmetric PSD with ``W·1 = 0``; ``A`` diagonal with positive entries.
+    - `mesh`: a [`Mesh`][bsfjax.Mesh].
+    - `mass`: ``"mixed"`` (default; mixed Voronoi, Meyer et al. 2003, libigl's default for
+      triangles) or ``"barycentric"``.  Mixed Voronoi areas are the consistent dual areas
+      of the cotangent operator on well-shaped meshes and stay positive on obtuse ones.
+    - `robust`: use the intrinsic-Delaunay "robust" Laplacian of Sharp & Crane 2020
+      (``pip install robust-laplacian``), for non-manifold or badly triangulated meshes.
+      Its mass is the lumped intrinsic Voronoi area.
+
+    **Returns:**
+
+    ``(W, A)``: ``W`` symmetric PSD with ``W·1 = 0``; ``A`` diagonal with positive entries.
     """
     if not isinstance(mesh, Mesh):
         raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")

@@ -2,10 +2,14 @@
 
 Eigensolves run on the numpy/scipy side in float64 (shift-invert block Lanczos with a CHOLMOD
 factor when the optional ``cholespy`` package is installed, ARPACK shift-invert Lanczos
-otherwise; see `bsfjax._eigensolver`); the result is a
+otherwise; see `bsfjax._spectral._eigensolver`); the result is a
 [`Spectrum`][bsfjax.Spectrum], a JAX pytree that every later stage takes as input.  Its arrays stay float64
 numpy until they enter a jitted function, where JAX converts them to its default float dtype
 (float32, or float64 under ``jax_enable_x64``).
+
+This module owns computing spectra (`spectrum_from_operators`, `spectrum` with its cache,
+`interval_spectrum`) and the choice of solver; the [`Spectrum`][bsfjax.Spectrum] type and its
+rescaling live in `bsfjax._spectral._spectrum_type`.
 """
 
 from __future__ import annotations
@@ -15,23 +19,21 @@ import os
 import warnings
 from pathlib import Path
 
-import equinox as eqx
-import jax
-import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg
 
 from .._util import atomic_path
-from ._eigensolver import block_lanczos, default_block, has_cholmod
+from ._eigensolver import block_lanczos, default_block
+from ._factorize import has_cholmod
 from .._util import BSFError, MeshError
 from ._laplacian import MASS_TYPES, laplacian
 from .._mesh import Mesh, n_components
+from ._spectrum_type import Spectrum
 from .._util import eigensolve_on_one_thread, one_blas_thread
 
-__all__ = ["Spectrum", "spectrum", "spectrum_from_operators", "interval_spectrum", "stack_spectra",
-           "unit_area", "map_to_unit_area"]
+__all__ = ["spectrum", "spectrum_from_operators", "interval_operators", "interval_spectrum"]
 
 #: Below this many vertices the generalized eigenproblem is solved densely (LAPACK).
 DENSE_LIMIT = 600
@@ -40,74 +42,6 @@ _CACHE_VERSION = 2
 METHODS = ("auto", "block", "lanczos", "dense", "fast")
 #: Relative residual ``‖Kψ − λψ‖ / λ_k`` of ``method="fast"`` (see [`spectrum_from_operators`][bsfjax.spectrum_from_operators]).
 FAST_TOL = 1e-3
-
-
-class Spectrum(eqx.Module):
-    """The first ``k`` Laplace–Beltrami eigenpairs of a shape.
-
-    Attributes:
-        evals: ``(k,)`` eigenvalues λ₁ ≤ … ≤ λ_k (λ₁ = 0 on a connected shape; clipped at 0).
-        evecs: ``(n, k)`` eigenvectors Φ, A-orthonormal: Φᵀ A Φ = I.
-        mass: ``(n,)`` diagonal of the lumped mass matrix A (vertex areas).
-
-    Sign convention: every eigenvector has its entry of largest magnitude positive, so the same
-    input always gives the same basis.  ``Spectrum`` is a pytree: pass it to jitted functions, or
-    stack several of equal shapes with ``jax.tree.map(lambda *x: jnp.stack(x), *spectra)`` to
-    ``vmap`` over shapes.
-
-    Constructing a ``Spectrum`` from concrete arrays checks them ([`bsfjax.BSFError`][bsfjax.BSFError]):
-    matching shapes, real finite values, ``mass >= 0``; traced values are not checked.
-    """
-
-    evals: np.ndarray
-    evecs: np.ndarray
-    mass: np.ndarray
-
-    def __check_init__(self):
-        # Shapes and values are checked whenever a Spectrum is built from concrete arrays, so
-        # a NaN eigenvector or a negative area stops here instead of inside a jitted stage.
-        # (Pytree operations — vmap, jax.tree.map, stacking — do not run this check.)
-        arrays = (self.evals, self.evecs, self.mass)
-        if not all(isinstance(a, (np.ndarray, jax.Array)) for a in arrays) \
-                or any(isinstance(a, jax.core.Tracer) for a in arrays):
-            return  # traced or abstract values: nothing concrete to check
-        ev, phi, m = (tuple(a.shape) for a in arrays)
-        if len(ev) < 1 or len(phi) < 2 or len(m) < 1 or phi[-1] != ev[-1] or phi[-2] != m[-1] \
-                or not (phi[:-2] == ev[:-1] == m[:-1]):
-            raise BSFError(f"Spectrum needs evals (..., k), evecs (..., n, k) and mass (..., n) "
-                           f"with equal batch axes, got shapes {ev}, {phi}, {m}")
-        for name, a in zip(("evals", "evecs", "mass"), arrays):
-            if not (jnp.issubdtype(a.dtype, jnp.floating) or jnp.issubdtype(a.dtype, jnp.integer)):
-                raise BSFError(f"Spectrum.{name} must be real numbers, got dtype {a.dtype}")
-            bad = int(jnp.sum(~jnp.isfinite(a))) if isinstance(a, jax.Array) \
-                else int(np.sum(~np.isfinite(a)))
-            if bad:
-                raise BSFError(f"Spectrum.{name} contains {bad} NaN or infinite values")
-        neg = int(jnp.sum(self.mass < 0)) if isinstance(self.mass, jax.Array) \
-            else int(np.sum(self.mass < 0))
-        if neg:
-            raise BSFError(f"Spectrum.mass (vertex areas) must be >= 0, found {neg} negative "
-                           "entries")
-
-    @property
-    def k(self) -> int:
-        return int(self.evals.shape[-1])
-
-    @property
-    def n_vertices(self) -> int:
-        return int(self.evecs.shape[-2])
-
-    @property
-    def area(self):
-        """Total area Σ A_ii (a scalar, or an array for a stacked Spectrum)."""
-        return self.mass.sum(axis=-1)
-
-    def truncate(self, k: int) -> "Spectrum":
-        """The first ``k`` eigenpairs."""
-        if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) \
-                or not 1 <= k <= self.k:
-            raise BSFError(f"k must be an integer in [1, {self.k}], got {k!r}")
-        return Spectrum(self.evals[..., :k], self.evecs[..., :k], self.mass)
 
 
 def _signs(evecs: np.ndarray) -> np.ndarray:
@@ -175,47 +109,48 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
                             method: str = "auto") -> Spectrum:
     """Smallest ``k`` eigenpairs of ``W φ = λ A φ`` for any domain (mesh, curve, point cloud).
 
-    Arguments:
-        W: ``(n, n)`` symmetric positive semidefinite stiffness (sparse or dense).
-        A: ``(n, n)`` diagonal positive mass matrix (sparse or dense), or its diagonal ``(n,)``.
-        k: number of eigenpairs, ``1 <= k <= n``.
-        sigma: shift for shift-invert.  Default ``−10⁻⁶ · mean(W_ii) / mean(A_ii)``: a
-            small negative number, relative to the operator's own scale (so it is invariant to
-            the units of the mesh), that makes ``W − σA`` positive definite while keeping the
-            smallest eigenvalues nearest to the shift, so they converge first.
-        method: the eigensolver.
+    **Arguments:**
 
-            * ``"auto"`` (default): ``"dense"`` when ``n <= DENSE_LIMIT``, else ``"block"``
-              when the optional CHOLMOD backend (``pip install 'bsfjax[fast]'``, the
-              ``cholespy`` package) is installed and ``n ≥ BLOCK_MIN_VERTICES`` (20K) or
-              ``k ≥ BLOCK_MIN_K`` (45), else ``"lanczos"``; where the block solver fails (a
-              multiplicity above its block size) ``"auto"`` goes on with ``"lanczos"``
-              silently.
-            * ``"block"``: block Lanczos on ``(W − σA)⁻¹`` (`._eigensolver`),
-              exact: every pair reaches ``‖Kψ − λψ‖ ≤ 10⁻⁸ λ_k`` by the Krylov estimate and
-              ``≤ 10⁻⁶ λ_k`` recomputed (``K = A^-½ W A^-½``, ``ψ = A^½ φ``); on the TOSCA cat
-              (111K / 445K vertices, k = 100) eigenvalues agree with ARPACK's to 4e-13 / 8e-13
-              relative and the eigenspaces to a principal-angle sine of 1.4e-6, at 3.0–3.1× /
-              3.2× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without
-              CHOLMOD it uses scipy's SuperLU, which solves one column at a time: slower than
-              ``"lanczos"``.
-              Shapes with exact eigenvalue multiplicities above the block size (spheres,
-              symmetric toy meshes) may make it miss or not converge; ``spectrum`` then warns
-              and falls back to ``"lanczos"`` (a probe checks for missed eigenvalues).
-            * ``"lanczos"``: ARPACK shift-invert Lanczos (``scipy.sparse.linalg.eigsh``) with a
-              SuperLU factor — the solver of earlier versions.
-            * ``"dense"``: LAPACK on dense matrices (``O(n³)``: small ``n`` only).
-            * ``"fast"``: the block solver stopped at ``‖Kψ − λψ‖ ≤ 10⁻³ λ_k`` (``FAST_TOL``),
-              for users who want speed over exactness.  Error bounds: eigenvalue error
-              ``≤ ‖r‖`` (Bauer–Fike), in practice ``≈ ‖r‖² / gap``; eigenvector angle
-              ``≤ ‖r‖ / gap`` to the eigenspace.  Measured on the TOSCA cat (k = 100): the
-              largest recomputed residual was 8.6e-4 (111K) / 5.3e-4 (445K) λ_k, eigenvalues
-              within 3.5e-13 / 7.0e-13 relative of ARPACK's, eigenspaces of the first
-              25/50/100 vectors within a principal-angle sine of 1.2e-6 (the residual lies in
-              high frequencies, far from the wanted eigenvalues), and the BSF transfer error of
-              ``bench_large.py`` unchanged at stop 24 (``docs/benchmarks.md``); it is only
-              1.0–1.2× faster than ``"block"`` there, because the block method converges
-              abruptly.
+    - `W`: ``(n, n)`` symmetric positive semidefinite stiffness (sparse or dense).
+    - `A`: ``(n, n)`` diagonal positive mass matrix (sparse or dense), or its diagonal ``(n,)``.
+    - `k`: number of eigenpairs, ``1 <= k <= n``.
+    - `sigma`: shift for shift-invert.  Default ``−10⁻⁶ · mean(W_ii) / mean(A_ii)``: a
+      small negative number, relative to the operator's own scale (so it is invariant to
+      the units of the mesh), that makes ``W − σA`` positive definite while keeping the
+      smallest eigenvalues nearest to the shift, so they converge first.
+    - `method`: the eigensolver.
+
+        * ``"auto"`` (default): ``"dense"`` when ``n <= DENSE_LIMIT``, else ``"block"``
+          when the optional CHOLMOD backend (``pip install 'bsfjax[fast]'``, the
+          ``cholespy`` package) is installed and ``n ≥ BLOCK_MIN_VERTICES`` (20K) or
+          ``k ≥ BLOCK_MIN_K`` (45), else ``"lanczos"``; where the block solver fails (a
+          multiplicity above its block size) ``"auto"`` goes on with ``"lanczos"``
+          silently.
+        * ``"block"``: block Lanczos on ``(W − σA)⁻¹`` (`._eigensolver`),
+          exact: every pair reaches ``‖Kψ − λψ‖ ≤ 10⁻⁸ λ_k`` by the Krylov estimate and
+          ``≤ 10⁻⁶ λ_k`` recomputed (``K = A^-½ W A^-½``, ``ψ = A^½ φ``); on the TOSCA cat
+          (111K / 445K vertices, k = 100) eigenvalues agree with ARPACK's to 4e-13 / 8e-13
+          relative and the eigenspaces to a principal-angle sine of 1.4e-6, at 3.0–3.1× /
+          3.2× ARPACK's speed with CHOLMOD (``docs/benchmarks.md``).  Without
+          CHOLMOD it uses scipy's SuperLU, which solves one column at a time: slower than
+          ``"lanczos"``.
+          Shapes with exact eigenvalue multiplicities above the block size (spheres,
+          symmetric toy meshes) may make it miss or not converge; ``spectrum`` then warns
+          and falls back to ``"lanczos"`` (a probe checks for missed eigenvalues).
+        * ``"lanczos"``: ARPACK shift-invert Lanczos (``scipy.sparse.linalg.eigsh``) with a
+          SuperLU factor — the solver of earlier versions.
+        * ``"dense"``: LAPACK on dense matrices (``O(n³)``: small ``n`` only).
+        * ``"fast"``: the block solver stopped at ``‖Kψ − λψ‖ ≤ 10⁻³ λ_k`` (``FAST_TOL``),
+          for users who want speed over exactness.  Error bounds: eigenvalue error
+          ``≤ ‖r‖`` (Bauer–Fike), in practice ``≈ ‖r‖² / gap``; eigenvector angle
+          ``≤ ‖r‖ / gap`` to the eigenspace.  Measured on the TOSCA cat (k = 100): the
+          largest recomputed residual was 8.6e-4 (111K) / 5.3e-4 (445K) λ_k, eigenvalues
+          within 3.5e-13 / 7.0e-13 relative of ARPACK's, eigenspaces of the first
+          25/50/100 vectors within a principal-angle sine of 1.2e-6 (the residual lies in
+          high frequencies, far from the wanted eigenvalues), and the BSF transfer error of
+          ``bench_large.py`` unchanged (``docs/benchmarks.md``); it is only
+          1.0–1.2× faster than ``"block"`` there, because the block method converges
+          abruptly.
 
     Uses a fixed start (deterministic).  Eigenvectors are A-orthonormalized and sign-fixed.
     Non-convergence raises [`BSFError`][bsfjax.BSFError] (never a partial result).
@@ -266,14 +201,14 @@ def spectrum_from_operators(W, A, k: int, *, sigma: float | None = None,
     return Spectrum(evals=evals, evecs=evecs, mass=a)
 
 
-#: ``method="auto"`` takes the block solver from this many vertices on.  Measured at stop 25
+#: ``method="auto"`` takes the block solver from this many vertices on.  Measured
 #: (block solver against ARPACK, best of two, 2 cores): k = 100, 6.9K vertices 0.37 s against
 #: 0.46 s, 10K 0.53 s against 0.71 s, 27.9K 1.45 s against 3.19 s; k = 30, 6.9K 0.15 s against
 #: 0.11 s, 10K 0.21 s against 0.19 s, 27.9K 0.59 s against 0.63 s.  From 20K it is as fast at
 #: small k and much faster at large k; below, it wins at large k only (`BLOCK_MIN_K`).
 BLOCK_MIN_VERTICES = 20_000
 
-#: ... and for any size from this many eigenpairs on.  Measured at stop 29 (median of 4, 2
+#: ... and for any size from this many eigenpairs on.  Measured (median of 4, 2
 #: cores; ARPACK / block): k = 100, 2.0K vertices 0.18 / 0.11 s, 3.4K 0.25 / 0.25, 4.1K 0.28 /
 #: 0.25, 5.0K 0.36 / 0.23, 5.5K 0.36 / 0.26, 6.9K 0.45 / 0.32; k = 60, 2.0K 0.12 / 0.08, 3.4K
 #: 0.19 / 0.14, 5.0K 0.22 / 0.15, 5.5K 0.22 / 0.22, 6.9K 0.28 / 0.24; k = 45, 4.1K 0.14 / 0.11,
@@ -411,98 +346,3 @@ def interval_spectrum(n: int, k: int, length: float = 1.0) -> Spectrum:
     """
     W, a = interval_operators(n, length)
     return spectrum_from_operators(W, a, k)
-
-
-def stack_spectra(spectra) -> Spectrum:
-    """Stack spectra of equal ``(n, k)`` along a new leading axis, for ``vmap`` over shapes."""
-    spectra = list(spectra)
-    if not spectra or not all(isinstance(s, Spectrum) for s in spectra):
-        raise BSFError("spectra must be a non-empty sequence of bsfjax.Spectrum, got "
-                       f"{[type(s).__name__ for s in spectra]}")
-    shapes = {(s.n_vertices, s.k) for s in spectra}
-    if len(shapes) != 1:
-        raise BSFError(f"spectra to stack must share (n_vertices, k); got {sorted(shapes)}")
-    return jax.tree.map(lambda *x: np.stack(x), *spectra)
-
-
-def unit_area_pair(source: Spectrum, target: Spectrum):
-    """``(source', a_M, target', a_N)``: the two spectra rescaled to one area near 1, the
-    source as `unit_area` does (``a_M`` the power of 4 nearest ``S_M``), the target by
-    ``a_N = a_M·S_N/S_M`` (per pair of a stack).
-
-    What a pair-level computation needs: descriptor and Laplacian-commutativity terms compare
-    the two shapes' eigenvalues and descriptors, and ZoomOut's nearest neighbours (``Φ_M Cᵀ``
-    against ``Φ_N``) presume an orthogonal ``C``, which an isometry has only between shapes of
-    one area.  So a target in millimetres and a source in metres are matched as two shapes in
-    metres (until stop 31 one common factor kept their relative scale, and such a pair got
-    2 % of the SMPL parts right).  Two shapes of equal area keep exact power-of-4 factors: the
-    results of the unscaled shapes bit for bit.  Returns ``(source, None, target, None)`` for
-    traced arrays or areas that are not finite and positive.
-    """
-    import jax
-
-    specs = (source, target)
-    if any(isinstance(x, jax.core.Tracer) for s_ in specs for x in (s_.evals, s_.evecs, s_.mass)):
-        return source, None, target, None
-    areas = [np.asarray(s_.mass, np.float64).sum(axis=-1) for s_ in specs]
-    if not all(np.all(np.isfinite(a)) and np.all(a > 0) for a in areas):
-        return source, None, target, None
-    from .._util import pow2_scale
-
-    a_m = np.asarray(pow2_scale(areas[0], even=True))
-    a_n = a_m * (areas[1] / areas[0])  # = a_m, exactly, for equal areas
-    return _rescaled(source, a_m), a_m, _rescaled(target, a_n), a_n
-
-
-def _rescaled(spec: Spectrum, a) -> Spectrum:
-    if np.all(a == 1) and all(isinstance(x, np.ndarray) and x.dtype == np.float64
-                              for x in (spec.evals, spec.evecs, spec.mass)):
-        return spec  # already what the rescaling would give: no n × k copy (the steps after
-        # estimate_map's own rescaling see the source at factor 1)
-    return Spectrum(np.asarray(spec.evals, np.float64) * a[..., None],
-                    np.asarray(spec.evecs, np.float64) * np.sqrt(a)[..., None, None],
-                    np.asarray(spec.mass, np.float64) / a[..., None])
-
-
-def unit_area(spec: Spectrum):
-    """``(spectrum of the shape rescaled to unit area, area)``, computed on the host in float64.
-
-    ``λ ↦ λ·S``, ``Φ ↦ Φ·√S``, ``A ↦ A/S`` with ``S ≈ Σ A`` (the nearest power of 4; per
-    shape of a stack), so the
-    stages after the spectrum, which cast to float32 by default, see unit-scale numbers: a mesh
-    in units of 1e-20 or 1e20 (areas 1e±40, beyond float32) works like one in metres.  A map
-    ``C`` between the original bases is ``C' = C·√(S_M/S_N)`` between the unit-area ones; a
-    function's values do not change.  Returns ``(spec, None)`` for traced arrays (no change).
-    """
-    import jax
-
-    if any(isinstance(x, jax.core.Tracer) for x in (spec.evals, spec.evecs, spec.mass)):
-        return spec, None
-    from .._util import pow2_scale
-
-    mass = np.asarray(spec.mass, np.float64)
-    area = mass.sum(axis=-1)
-    if not np.all(np.isfinite(area)) or not np.all(area > 0):
-        return spec, None  # nothing to normalize by (the Spectrum check reports bad areas)
-    # S rounded to a power of 4: the rescaling (and √S) is exact, so a mesh of ordinary size
-    # gives bit-identical results, and the areas end up in [0.5, 2]
-    a = np.asarray(pow2_scale(area, even=True))
-    out = Spectrum(np.asarray(spec.evals, np.float64) * a[..., None],
-                   np.asarray(spec.evecs, np.float64) * np.sqrt(a)[..., None, None],
-                   mass / a[..., None])
-    return out, a
-
-
-def map_to_unit_area(C, area_source, area_target, inverse: bool = False):
-    """``C·√(S_M/S_N)`` (a map between original bases → between unit-area bases), or the
-    inverse; ``C`` unchanged when an area is ``None`` (traced).  A host array (or list) comes
-    back as a float64 numpy array, a JAX array in its dtype."""
-    if C is None or area_source is None or area_target is None:
-        return C
-    r = np.sqrt(np.asarray(area_source, np.float64) / np.asarray(area_target, np.float64))
-    r = 1.0 / r if inverse else r
-    if np.ndim(r):
-        r = r[..., None, None]
-    if not isinstance(C, jax.Array):
-        return np.asarray(C, np.float64) * r
-    return C * jnp.asarray(r, jnp.result_type(C))

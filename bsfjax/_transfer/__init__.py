@@ -1,15 +1,24 @@
-"""Transfer methods (BSF and the paper's baselines) and the engine that runs any of them on one pair or a batch of pairs."""
+"""Transfer methods and the one engine that runs them.
 
-from ._engine import Pair, TransferResult, stack_pairs, transfer, transfer_pairs
-from ._methods import (
-    AbstractMethod, BSF, CODER_NAMES, GeodesicBalls, METHODS, PAPER_GAMMA, PAPER_TAUS, Pair,
-    ProductBasis, PullBack, RefinedPullBack, SaturatedHeat, SpectralProjection, as_method,
-    geodesic_ball_radii, method_name, product_basis, saturate,
+A method (`AbstractMethod`) prepares a pair of spectra and a set of functions once and carries
+them through any functional map: the paper's BSF with any coder, its competitors (spectral
+projection, pull-back, product basis, geodesic balls, saturated heat), and the pull-back through
+a refined map (`refined`, the default for labels).  `transfer` runs one pair, `transfer_pairs`
+a stack of pairs under `vmap`.
+"""
+
+from ._engine import TransferResult, stack_pairs, transfer, transfer_pairs
+from ._baselines import (
+    GeodesicBalls, ProductBasis, PullBack, SaturatedHeat, SpectralProjection,
+    geodesic_ball_radii, product_basis, saturate,
 )
+from ._bsf import AbstractMethod, BSF, PAPER_GAMMA, PAPER_TAUS, Pair
+from ._methods import CODER_NAMES, METHODS, as_method, method_name
+from ._refined import RefinedPullBack
 
 __all__ = [
     "AbstractMethod", "BSF", "CODER_NAMES", "GeodesicBalls", "METHODS", "PAPER_GAMMA",
-    "PAPER_TAUS", "Pair", "Pair", "ProductBasis", "PullBack", "RefinedPullBack",
+    "PAPER_TAUS", "Pair", "ProductBasis", "PullBack", "RefinedPullBack",
     "SaturatedHeat", "SpectralProjection", "TransferResult", "as_method", "geodesic_ball_radii",
     "method_name", "product_basis", "saturate", "stack_pairs", "transfer", "transfer_pairs",
 ]

@@ -1,7 +1,7 @@
 """The transfer engine: one function that runs every method on one pair or a stack of pairs.
 
 [`transfer`][bsfjax.transfer] validates the inputs once (concrete values, before tracing), then runs the
-method's ``prepare`` and ``carry`` (`bsfjax._methods`) in one jitted function; a stacked
+method's ``prepare`` and ``carry`` (`bsfjax._transfer._methods`) in one jitted function; a stacked
 [`Pair`][bsfjax.Pair] (leading pair axis on every array) runs all pairs under one ``vmap``,
 with the pair axis sharded over all JAX devices.  Everything else that transfers — the
 mesh-level [`bsfjax.transfer_values`][bsfjax.transfer_values] / [`bsfjax.transfer_labels`][bsfjax.transfer_labels], ``bsfjax
@@ -117,16 +117,16 @@ def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pai
 
     **Arguments:**
 
-    - ``method``: a name of [`bsfjax.METHODS`][bsfjax.METHODS] (``"omp"``, ``"lstsq"``, ``"std"``,
+    - `method`: a name of [`bsfjax.METHODS`][bsfjax.METHODS] (``"omp"``, ``"lstsq"``, ``"std"``,
       ``"p2p"``, …) or a method object (``bsfjax.BSF(coder=bsfjax.OMP(sparsity=20))``).
-    - ``pair``: a [`Pair`][bsfjax.Pair], or a stack of ``P`` of them
+    - `pair`: a [`Pair`][bsfjax.Pair], or a stack of ``P`` of them
       ([`stack_pairs`][bsfjax.stack_pairs]: leading axis ``P``) to run all pairs under one ``vmap``.
-    - ``f``: ``(m, n_M)`` functions on the source (``(P, m, n_M)`` for a stack).
-    - ``k``: source basis size (``"std2"`` uses ``2k``).  Default: the columns of ``pair.C``.
-    - ``transfer``: also transfer (needs ``target`` and ``C`` / ``C2`` / ``p2p``).
-    - ``k_targets``: optional target sizes ``k_N ≤ C.shape[0]``: one transfer per
+    - `f`: ``(m, n_M)`` functions on the source (``(P, m, n_M)`` for a stack).
+    - `k`: source basis size (``"std2"`` uses ``2k``).  Default: the columns of ``pair.C``.
+    - `transfer`: also transfer (needs ``target`` and ``C`` / ``C2`` / ``p2p``).
+    - `k_targets`: optional target sizes ``k_N ≤ C.shape[0]``: one transfer per
       ``C[:k_N]``, reusing one code; ``transferred`` is then a tuple.
-    - ``**options``: with a method name, its options ([`bsfjax.as_method`][bsfjax.as_method]).
+    - ``**options``: with a method name, its options (`as_method`).
 
     Returns a [`TransferResult`][bsfjax.TransferResult] ``(approximation, transferred, codes)``: ``(m, n_M)``,
     ``(m, n_N)`` and ``(m, q)`` arrays (``(P, …)`` for a stack); ``approximation`` is
@@ -161,7 +161,7 @@ def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pai
                        f"n_M = {n_m}, got {f_shape}")
     check_finite(f, "f")
     dtype = jax.dtypes.canonicalize_dtype(jnp.float64)
-    # per function, in float64 before the cast (issue 18); not for an absolute coder eps
+    # per function, in float64 before the cast; not for an absolute coder eps
     F, scale = unit_scale(f, dtype) if homogeneous(method) else (jnp.asarray(f, dtype), None)
     pair = _unit_area_pair(method, pair)
     pair = jax.tree.map(lambda x: jnp.asarray(x, dtype)
@@ -185,7 +185,7 @@ def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pai
 
 
 def _unit_area_pair(method: AbstractMethod, pair: Pair) -> Pair:
-    """The pair on the shapes rescaled to unit area (`bsfjax._spectrum.unit_area`), in
+    """The pair on the shapes rescaled to unit area (`bsfjax._spectral.unit_area`), in
     float64 on the host before any cast: maps ``C``, ``C2`` become ``C·√(S_M/S_N)`` and geodesic
     distances ``d/√S_M``; every method's output is invariant to this (its scales follow the
     areas: the ``"unit_area"`` τ convention, ball radii from atom areas).  Not with the

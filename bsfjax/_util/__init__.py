@@ -1,6 +1,17 @@
-"""Shared helpers below every stage: errors, argument checks, atomic files, threads, memory, devices, Ctrl-C."""
+"""Shared helpers below every stage.
 
+Errors (`BSFError`, `MeshError`), argument checks that name the bad value, atomic file writes
+and output transactions, BLAS-thread and memory control, sharding over JAX devices, size
+buckets, Ctrl-C handling of the command line, and the package version.  Imports nothing
+else of bsfjax.
+"""
+
+# first: the `bsfjax` command handles Ctrl-C from here on, before the heavy imports below
+# (a no-op when bsfjax is imported as a library; see _signals)
 from ._signals import exit_now, install_sigint_handler, is_cli_process
+
+install_sigint_handler()
+
 from ._buckets import BUCKET_FACTORS, MERGE_PADDING, merge_buckets, size_bucket
 from ._devices import map_over_devices, n_devices, pad_leading, shard_leading
 from ._errors import BSFError, MeshError

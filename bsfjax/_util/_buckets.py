@@ -1,6 +1,6 @@
 """Size buckets: the few padded sizes a jitted stage compiles for, instead of one per size.
 
-Owner of `BUCKET_FACTORS` and [`size_bucket`][bsfjax.size_bucket], used by the per-target kernel of
+Owner of `BUCKET_FACTORS` and `size_bucket`, used by the per-target kernel of
 [`bsfjax.transfer_collection`][bsfjax.transfer_collection] (vertex and face counts) and by the jitted farthest point
 sampling (point counts).
 """

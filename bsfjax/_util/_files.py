@@ -5,10 +5,10 @@ temporary file in the destination folder (same filesystem, so the final ``os.rep
 atomic on POSIX and Windows), flushed to disk, then renamed over the destination.  An
 interrupted run leaves the previous file untouched and at worst a stray ``.tmp`` file.
 
-Two additions for the command line (issue 18):
+Two additions for the command line:
 
 * every live temporary file is recorded in `LIVE_TEMPS`, so that the SIGINT handler of
-  `bsfjax._signals` can remove them before it ends the process;
+  `bsfjax._util._signals` can remove them before it ends the process;
 * `output_transaction`: inside it, `atomic_path` does not rename at the end but
   queues the rename; on a clean exit all queued files are renamed together (with SIGINT
   blocked), on an error none is, so one command writes all its outputs or none.

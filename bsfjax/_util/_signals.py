@@ -4,7 +4,7 @@ Python's default SIGINT handling raises ``KeyboardInterrupt`` wherever the main 
 inside an import of the start-up it prints a traceback (and an exception caught by a library
 can even end in exit status 0), and after it the interpreter finalizes while XLA's thread
 pools are still running, which segfaults now and then.  The command's handler therefore does
-its own clean-up (the temporary files of `bsfjax._files`), prints one line and ends the
+its own clean-up (the temporary files of `bsfjax._util._files`), prints one line and ends the
 process with ``os._exit(130)``, skipping the interpreter finalization altogether.
 
 It is installed as early as possible: by ``bsfjax/__init__.py`` *before* its heavy imports
@@ -35,7 +35,7 @@ def is_cli_process() -> bool:
 
 def _on_sigint(signum, frame) -> None:  # pragma: no cover - runs in a subprocess
     try:
-        files = sys.modules.get("bsfjax._files")
+        files = sys.modules.get(__name__.rsplit(".", 1)[0] + "._files")  # loaded, never imported here
         if files is not None:
             files.remove_live_temps()
         sys.stdout.flush()

@@ -7,7 +7,7 @@ matrices inside our jitted stages) go through scipy's OpenBLAS.  So every such c
 host eigensolve just before the stages, leaves a thread spinning on a core that XLA's next
 matrix product wanted: on this project's 2-core machine the nearest-neighbour search after the
 descriptors' ``eigh`` ran 1.5× slower (0.11 s against 0.074 s at 5K × 6.9K vertices), and the
-three stages of a 5K target 0.10 s slower (``docs/benchmarks.md``, stop 30).
+three stages of a 5K target 0.10 s slower (``docs/benchmarks.md``).
 
 The matrices OpenBLAS sees on these paths are small (``k × k``, or the eigensolver's ``n × b``
 blocks at ``n`` ≲ 10⁴), where a second thread gains nothing: the block eigensolver takes the

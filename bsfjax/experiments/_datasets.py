@@ -187,10 +187,11 @@ def _load_group(folder: Path, group: str) -> list[ShapeEntry]:
 def load_dataset(path) -> Dataset:
     """Load every mesh of a ``--data`` folder and check its correspondences (module doc).
 
-    Raises:
-        BSFError: a missing folder, no meshes, unreadable meshes, missing / malformed /
-            inconsistent ``.vts`` files, or meshes of different sizes without ``.vts`` — the
-            message names the folder or file.
+    **Raises:**
+
+    - `BSFError`: a missing folder, no meshes, unreadable meshes, missing / malformed /
+      inconsistent ``.vts`` files, or meshes of different sizes without ``.vts`` — the
+      message names the folder or file.
     """
     root = Path(path)
     if not root.exists():

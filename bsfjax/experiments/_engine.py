@@ -8,7 +8,7 @@ Every call of the experiments into the engine ([`bsfjax.transfer`][bsfjax.transf
 
 What the experiments see:
 
-* method names: [`METHODS`][bsfjax.METHODS], [`CODERS`][bsfjax.CODERS], `APPROX_METHODS`,
+* method names: [`METHODS`][bsfjax.METHODS], `CODERS`, `APPROX_METHODS`,
   `TRANSFER_METHODS`, `KN_METHODS`, `PLAIN_METHODS`;
 * settings: `settings` (``settings(**overrides)``: the paper's defaults, i.e. each
   method's own defaults, with ``taus``, ``gamma``, ``sparsity``, ``eps_fraction``, … applied
@@ -110,11 +110,12 @@ def pair_input(source, target=None, C=None, C2=None, p2p=None, centers=None,
                distances=None) -> Pair:
     """One source/target pair as the engine takes it.
 
-    Arguments:
-        source, target: the two spectra (``target`` ``None`` for approximation only).
-        C: ``(k_N, k)`` functional map; C2: ``std2``'s ``(2k_N, 2k)`` map.
-        p2p: point map (target vertex → source vertex) of the ``p2p`` method.
-        centers: BSF centres on the source; distances: geodesic distances from them (``geod``).
+    **Arguments:**
+
+    - `source`, `target`: the two spectra (``target`` ``None`` for approximation only).
+    - `C`: ``(k_N, k)`` functional map; C2: ``std2``'s ``(2k_N, 2k)`` map.
+    - `p2p`: point map (target vertex → source vertex) of the ``p2p`` method.
+    - `centers`: BSF centres on the source; distances: geodesic distances from them (``geod``).
     """
     return Pair(source=source, target=target, C=C, C2=C2, p2p=p2p, centers=centers,
                 distances=distances)
@@ -129,17 +130,19 @@ def run_method(method: str, pair, F, *, k: int, settings: Settings, transfer: bo
                k_targets=None) -> TransferResult:
     """Approximate ``F`` on the source with ``method`` and transfer it to the target.
 
-    Arguments:
-        method: one of [`METHODS`][bsfjax.METHODS].
-        pair: `pair_input` (or a `stack` of them).
-        F: ``(m, n_M)`` functions (``(P, m, n_M)`` for a stack).
-        k: source basis size.
-        settings: `settings`.
-        transfer: also transfer (else ``transferred`` is ``None``).
-        k_targets: target sizes: one transfer per ``C[:k_N]`` (``transferred`` a tuple).
+    **Arguments:**
 
-    Returns:
-        ``(approximation, transferred, codes)`` (``approximation`` is ``None`` for ``p2p``).
+    - `method`: one of [`METHODS`][bsfjax.METHODS].
+    - `pair`: `pair_input` (or a `stack` of them).
+    - `F`: ``(m, n_M)`` functions (``(P, m, n_M)`` for a stack).
+    - `k`: source basis size.
+    - `settings`: `settings`.
+    - `transfer`: also transfer (else ``transferred`` is ``None``).
+    - `k_targets`: target sizes: one transfer per ``C[:k_N]`` (``transferred`` a tuple).
+
+    **Returns:**
+
+    ``(approximation, transferred, codes)`` (``approximation`` is ``None`` for ``p2p``).
     """
     return _run_transfer(settings.method(method), pair, F, k=k, transfer=transfer,
                     k_targets=k_targets)

@@ -1,6 +1,6 @@
 """Files and tables of the experiments: tidy rows → CSV, summaries, Markdown pivots, PNG plots.
 
-All files are written atomically (`bsfjax._files.atomic_path`): a failed or interrupted
+All files are written atomically (`bsfjax._util._files.atomic_path`): a failed or interrupted
 run leaves no partial file.
 """
 
@@ -25,11 +25,12 @@ PAPER_SETTINGS = ("n_BSF = 5 % (Euclidean FPS), τ = (0.001, 0.005, 0.01) unit-a
 class Report(NamedTuple):
     """What an experiment's report function returns (files are written by ``reproduce``).
 
-    Attributes:
-        markdown: the body of ``NAME.md`` (below the header).
-        panels: figure panels for ``NAME.png`` (``[(title, xlabel, {label: (xs, ys)},
-            categorical)]``, see ``_line_plot``), or ``None`` for no figure.
-        settings: the settings line of the header, or ``None`` for `PAPER_SETTINGS`.
+    **Attributes:**
+
+    - `markdown`: the body of ``NAME.md`` (below the header).
+    - `panels`: figure panels for ``NAME.png`` (``[(title, xlabel, {label: (xs, ys)},
+      categorical)]``, see ``_line_plot``), or ``None`` for no figure.
+    - `settings`: the settings line of the header, or ``None`` for `PAPER_SETTINGS`.
     """
 
     markdown: str
@@ -43,10 +44,11 @@ def summarize(rows: Sequence[dict], by: Sequence[str], value: str = "error") -> 
     """Mean, standard deviation, median and count of ``value`` per group of ``by`` columns
     (groups in first-seen order; non-finite values are left out of the statistics).
 
-    Arguments:
-        rows: tidy rows (dicts), as the experiments return them.
-        by: the columns that define a group.
-        value: the column to aggregate.
+    **Arguments:**
+
+    - `rows`: tidy rows (dicts), as the experiments return them.
+    - `by`: the columns that define a group.
+    - `value`: the column to aggregate.
     """
     groups: dict = {}
     for r in rows:
@@ -67,12 +69,13 @@ def pivot_markdown(rows: Sequence[dict], index: str | Sequence[str], columns: st
     """A Markdown table: one row per ``index`` value, one column per ``columns`` value, cells the
     ``stat`` of ``value``; the best cell of each column in bold (``best="min"``/``"max"``).
 
-    Arguments:
-        rows: tidy rows.
-        index: column(s) whose values make the table's rows.
-        columns: column(s) whose values make the table's columns.
-        value: the aggregated column; stat: ``"mean"``, ``"std"``, ``"median"`` or ``"n"``.
-        fmt: cell format; best: ``"min"``, ``"max"`` or ``None`` (no bold cell).
+    **Arguments:**
+
+    - `rows`: tidy rows.
+    - `index`: column(s) whose values make the table's rows.
+    - `columns`: column(s) whose values make the table's columns.
+    - `value`: the aggregated column; stat: ``"mean"``, ``"std"``, ``"median"`` or ``"n"``.
+    - `fmt`: cell format; best: ``"min"``, ``"max"`` or ``None`` (no bold cell).
     """
     index = (index,) if isinstance(index, str) else tuple(index)
     columns = (columns,) if isinstance(columns, str) else tuple(columns)
@@ -104,9 +107,10 @@ def pivot_markdown(rows: Sequence[dict], index: str | Sequence[str], columns: st
 def write_csv(rows: Sequence[dict], path) -> Path:
     """Write tidy rows (union of keys as header) atomically; returns the path.
 
-    Arguments:
-        rows: tidy rows (dicts).
-        path: the ``.csv`` file to write.
+    **Arguments:**
+
+    - `rows`: tidy rows (dicts).
+    - `path`: the ``.csv`` file to write.
     """
     path = Path(path)
     # keys starting with "_" carry per-vertex payloads for figures, not table columns

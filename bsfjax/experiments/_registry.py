@@ -31,13 +31,14 @@ __all__ = ["Experiment", "EXPERIMENTS", "reproduce"]
 class Experiment:
     """One entry of the registry.
 
-    Attributes:
-        name: the ``bsfjax reproduce`` name (also the stem of the output files).
-        description: what ``NAME.md`` shows (its first paragraph).
-        run: ``run(dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> rows``.
-        default_ks: the k list when ``reproduce`` gets none.
-        report: ``report(rows, ks) -> Report``.
-        uses_functions: whether ``functions`` matters (else left out of the metadata).
+    **Attributes:**
+
+    - `name`: the ``bsfjax reproduce`` name (also the stem of the output files).
+    - `description`: what ``NAME.md`` shows (its first paragraph).
+    - `run`: ``run(dataset, *, pairs, functions, ks, seed, cache_dir, progress) -> rows``.
+    - `default_ks`: the k list when ``reproduce`` gets none.
+    - `report`: ``report(rows, ks) -> Report``.
+    - `uses_functions`: whether ``functions`` matters (else left out of the metadata).
     """
 
     name: str
@@ -76,21 +77,23 @@ def reproduce(name: str, data, out, *, pairs: int = 2, functions: int = 100, see
     """Run one experiment on a ``--data`` folder and write ``NAME.csv``, ``NAME.md``,
     ``NAME.json`` (and ``NAME.png`` for figures) into ``out``.
 
-    Arguments:
-        name: a key of `EXPERIMENTS`.
-        data: the ``--data`` folder (`load_dataset`).
-        out: output folder.
-        pairs: number of pairs (table5: per class).
-        functions: random indicators per shape.
-        seed: seed of the pairs, the functions and the FPS.
-        ks: the experiment's k list (default: the entry's ``default_ks``; fig7: the k_M list;
-            fig10, sparse: the first entry is the k).
-        cache_dir: eigenbasis cache folder (default ``out/.spectra``).
-        progress: show progress bars.
-        segmentation: template segmentation file (experiments that use one: ``segmentation``).
+    **Arguments:**
 
-    Returns:
-        ``{"rows", "files", "seconds"}``.
+    - `name`: a key of `EXPERIMENTS`.
+    - `data`: the ``--data`` folder (`load_dataset`).
+    - `out`: output folder.
+    - `pairs`: number of pairs (table5: per class).
+    - `functions`: random indicators per shape.
+    - `seed`: seed of the pairs, the functions and the FPS.
+    - `ks`: the experiment's k list (default: the entry's ``default_ks``; fig7: the k_M list;
+      fig10, sparse: the first entry is the k).
+    - `cache_dir`: eigenbasis cache folder (default ``out/.spectra``).
+    - `progress`: show progress bars.
+    - `segmentation`: template segmentation file (experiments that use one: ``segmentation``).
+
+    **Returns:**
+
+    ``{"rows", "files", "seconds"}``.
     """
     exp = EXPERIMENTS.get(name) if isinstance(name, str) else None
     if exp is None:

@@ -60,19 +60,21 @@ def prepare_shapes(dataset: Dataset, indices: Sequence[int], *, k_max: int, n_bs
                    cache_dir=None, progress: bool = False) -> dict[int, ShapeData]:
     """Spectra (``k_max`` eigenpairs), FPS centres and optional geodesic distances per shape.
 
-    Arguments:
-        dataset: the loaded ``--data`` folder (`load_dataset`).
-        indices: the shapes (indices into ``dataset.shapes``; duplicates are fine).
-        k_max: eigenpairs to compute (at most the vertex count).
-        n_bsf: BSF centres, a share of the vertices (float) or a count (int).
-        fps: farthest point sampling distance: ``"euclidean"``, ``"geodesic"``, ``"biharmonic"``.
-        seed: FPS seed.
-        geodesics: also compute heat-method geodesic distances from the centres (``geod``).
-        cache_dir: eigenbasis cache folder (``None``: no cache).
-        progress: show a progress bar.
+    **Arguments:**
 
-    Returns:
-        ``{index: ShapeData}``.
+    - `dataset`: the loaded ``--data`` folder (`load_dataset`).
+    - `indices`: the shapes (indices into ``dataset.shapes``; duplicates are fine).
+    - `k_max`: eigenpairs to compute (at most the vertex count).
+    - `n_bsf`: BSF centres, a share of the vertices (float) or a count (int).
+    - `fps`: farthest point sampling distance: ``"euclidean"``, ``"geodesic"``, ``"biharmonic"``.
+    - `seed`: FPS seed.
+    - `geodesics`: also compute heat-method geodesic distances from the centres (``geod``).
+    - `cache_dir`: eigenbasis cache folder (``None``: no cache).
+    - `progress`: show a progress bar.
+
+    **Returns:**
+
+    ``{index: ShapeData}``.
     """
     out = {}
     for i in tqdm(sorted(set(indices)), desc="shapes", disable=not progress, leave=False):

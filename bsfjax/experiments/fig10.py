@@ -39,19 +39,21 @@ def parameter_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 1
     while one setting varies around the paper's defaults (`SWEEPS`): the centre share
     n_BSF, the FPS distance, γ (all four coders), ε (``omp_error``) and S (``omp``).
 
-    Arguments:
-        dataset: the ``--data`` folder (`load_dataset`).
-        pairs: number of pairs.
-        functions: random indicators per source shape.
-        k: basis size (square ground-truth maps).
-        sweeps: a sub-dict of `SWEEPS` (``None``: all of it).
-        seed: seed of the pairs, the functions and the FPS.
-        cache_dir: eigenbasis cache folder.
-        progress: show progress bars.
+    **Arguments:**
 
-    Returns:
-        Rows ``{"parameter", "value", "method", "source", "target", "function", "error",
-        "approx_error", ...}`` (``value`` as a string).
+    - `dataset`: the ``--data`` folder (`load_dataset`).
+    - `pairs`: number of pairs.
+    - `functions`: random indicators per source shape.
+    - `k`: basis size (square ground-truth maps).
+    - `sweeps`: a sub-dict of `SWEEPS` (``None``: all of it).
+    - `seed`: seed of the pairs, the functions and the FPS.
+    - `cache_dir`: eigenbasis cache folder.
+    - `progress`: show progress bars.
+
+    **Returns:**
+
+    Rows ``{"parameter", "value", "method", "source", "target", "function", "error",
+    "approx_error", ...}`` (``value`` as a string).
     """
     sweeps = SWEEPS if sweeps is None else sweeps
     bad = set(sweeps) - set(SWEEPS)

@@ -30,22 +30,24 @@ def kn_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 100,
                   cache_dir=None, progress: bool = True) -> list[dict]:
     """Fig. 7: transfer error with ground-truth ``(k_N, k_M)`` maps as ``k_N`` grows.
 
-    Arguments:
-        dataset: the ``--data`` folder (`load_dataset`).
-        pairs: number of pairs.
-        functions: random indicators per source shape.
-        k_sources: the source sizes ``k_M``.
-        k_targets: the target sizes ``k_N``.
-        methods: a subset of the methods other than ``std2`` and ``p2p``.
-        params: engine settings (`._engine.settings`; ``None``: the paper's).
-        n_bsf: BSF centres (share of the vertices or count).
-        seed: seed of the pairs, the functions and the FPS.
-        cache_dir: eigenbasis cache folder.
-        progress: show progress bars.
+    **Arguments:**
 
-    Returns:
-        Rows ``{"source", "target", "class", "k", "k_target", "method", "function", "error",
-        "maps"}`` (``k`` is ``k_M``).
+    - `dataset`: the ``--data`` folder (`load_dataset`).
+    - `pairs`: number of pairs.
+    - `functions`: random indicators per source shape.
+    - `k_sources`: the source sizes ``k_M``.
+    - `k_targets`: the target sizes ``k_N``.
+    - `methods`: a subset of the methods other than ``std2`` and ``p2p``.
+    - `params`: engine settings (`._engine.settings`; ``None``: the paper's).
+    - `n_bsf`: BSF centres (share of the vertices or count).
+    - `seed`: seed of the pairs, the functions and the FPS.
+    - `cache_dir`: eigenbasis cache folder.
+    - `progress`: show progress bars.
+
+    **Returns:**
+
+    Rows ``{"source", "target", "class", "k", "k_target", "method", "function", "error",
+    "maps"}`` (``k`` is ``k_M``).
     """
     params = _engine.settings() if params is None else params
     k_sources, k_targets = _check_ks(k_sources, "k_sources"), _check_ks(k_targets, "k_targets")

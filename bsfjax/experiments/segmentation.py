@@ -1,4 +1,4 @@
-"""Real segmentations: a part labelling of a template carried to other shapes (issue 14).
+"""Real segmentations: a part labelling of a template carried to other shapes.
 
 Not in the paper.  A segmentation of the template (the SMPL body parts of the FAUST
 registrations, ``../shared/data/segmentations/``) labels every shape of a ``--data`` folder:
@@ -13,7 +13,8 @@ For each pair and each of three maps — ``default`` (what ``bsfjax transfer`` e
 map and its functional map) — and, when asked for, two maps without landmarks (``no
 landmarks``: what ``bsfjax transfer`` estimates without ``--landmarks``, several starts and
 landmarks read off the kept map; ``no landmarks, one start``: the single start at k = 30 with
-the orientation term that was its estimate until stop 32) and two with fewer landmarks (``1
+the orientation term, the landmark-free estimate of earlier versions) and two with fewer landmarks
+(``1
 landmark``, ``2 landmarks``: the default map's estimate with the first one or two of its 5
 landmarks) — every method labels the target
 through the same map, and the
@@ -35,7 +36,7 @@ from tqdm.auto import tqdm
 from .._util import BSFError
 from .._maps import fmap_from_p2p
 from .._pipeline import transfer_labels
-from .._maps import WKS_VARIANCE, ZOOMOUT_SAMPLES, estimate_map
+from .._maps import MapEstimator, estimate_map
 from .._mesh import load_labels
 from .._mesh import mesh_edges
 from .._maps import REFINE_EIGENPAIRS
@@ -155,7 +156,7 @@ def _maps(sm, sn, gt, k: int, landmarks, meshes, names) -> dict:
                                              refine_to=2 * k, **mesh_kw),
         "no landmarks, one start": lambda: estimate_map(
             sm.truncate(2 * k), sn.truncate(2 * k), k=k, refine_to=2 * k,
-            starts=((k, WKS_VARIANCE),), **mesh_kw)}
+            starts=((k, MapEstimator().wks_variance),), **mesh_kw)}
     out = {}
     for name in names:
         if name == "truth":
@@ -183,21 +184,23 @@ def segmentation_experiment(dataset: Dataset, *, segmentation, pairs: int = 6, k
     """Every method × map on ``pairs`` pairs (or the ``(source, target)`` indices of
     ``pair_list``).
 
-    Arguments:
-        dataset: the ``--data`` folder.
-        segmentation: template segmentation file ([`bsfjax.load_labels`][bsfjax.load_labels]).
-        pairs, seed: number of pairs drawn by `Dataset.pairs`.
-        k: basis size of the maps and of the spectral methods (spectra: ``K_SPECTRA``).
-        methods, maps: subsets of [`METHODS`][bsfjax.METHODS] and `MAPS` (default
-            `DEFAULT_MAPS`).
-        cache_dir: eigenbasis cache folder.
-        keep_labels: the first ``keep_labels`` pairs keep their per-vertex labels in the rows
-            (keys ``_labels``, ``_truth``, ``_mesh``, not written to the CSV) for the figure.
-        progress: progress bar.
+    **Arguments:**
 
-    Returns:
-        Rows ``{"source", "target", "kind", "map", "method", "accuracy", "unassigned",
-        "iou_mean", "iou_worst", "border_accuracy", "seconds", "regime"}``.
+    - `dataset`: the ``--data`` folder.
+    - `segmentation`: template segmentation file ([`bsfjax.load_labels`][bsfjax.load_labels]).
+    - `pairs`, `seed`: number of pairs drawn by `Dataset.pairs`.
+    - `k`: basis size of the maps and of the spectral methods (spectra: ``K_SPECTRA``).
+    - `methods`, `maps`: subsets of [`METHODS`][bsfjax.METHODS] and `MAPS` (default
+      `DEFAULT_MAPS`).
+    - `cache_dir`: eigenbasis cache folder.
+    - `keep_labels`: the first ``keep_labels`` pairs keep their per-vertex labels in the rows
+      (keys ``_labels``, ``_truth``, ``_mesh``, not written to the CSV) for the figure.
+    - `progress`: progress bar.
+
+    **Returns:**
+
+    Rows ``{"source", "target", "kind", "map", "method", "accuracy", "unassigned",
+    "iou_mean", "iou_worst", "border_accuracy", "seconds", "regime"}``.
     """
     template, _ = load_labels(segmentation)
     _check_choices(methods, maps)
@@ -222,14 +225,15 @@ def segmentation_pair(sm, sn, meshes, labels_m: np.ndarray, labels_n: np.ndarray
                       keep_labels: bool = False) -> list[dict]:
     """One pair of `segmentation_experiment`: every method through every map.
 
-    Arguments:
-        sm, sn: the pair's spectra (``K_SPECTRA`` eigenpairs, or fewer on small meshes).
-        meshes: ``(source mesh, target mesh)``.
-        labels_m, labels_n: the source's labels and the target's true labels.
-        gt: the ground-truth point map (target vertex → source vertex).
-        k, methods, maps, seed: as in `segmentation_experiment`.
-        names: the row's ``source`` and ``target``.
-        keep_labels: keep the per-vertex labels in the rows (for the figure).
+    **Arguments:**
+
+    - `sm`, `sn`: the pair's spectra (``K_SPECTRA`` eigenpairs, or fewer on small meshes).
+    - `meshes`: ``(source mesh, target mesh)``.
+    - `labels_m`, `labels_n`: the source's labels and the target's true labels.
+    - `gt`: the ground-truth point map (target vertex → source vertex).
+    - `k`, `methods`, `maps`, `seed`: as in `segmentation_experiment`.
+    - `names`: the row's ``source`` and ``target``.
+    - `keep_labels`: keep the per-vertex labels in the rows (for the figure).
     """
     _check_choices(methods, maps)
     src_mesh, tgt_mesh = meshes
@@ -237,7 +241,8 @@ def segmentation_pair(sm, sn, meshes, labels_m: np.ndarray, labels_n: np.ndarray
     landmarks = (lm_src, gt_inverse(gt, lm_src, tgt_mesh, src_mesh))
     all_maps = _maps(sm, sn, gt, k, landmarks, meshes, maps)
     # "refined" continues on the samples the default map's ZoomOut used, whatever the map
-    samples = (subsample(src_mesh, ZOOMOUT_SAMPLES), subsample(tgt_mesh, ZOOMOUT_SAMPLES))
+    n_samples = MapEstimator().zoomout_samples
+    samples = (subsample(src_mesh, n_samples), subsample(tgt_mesh, n_samples))
     rows = []
     for map_name in maps:
         C, p2p = all_maps[map_name]

@@ -1,10 +1,11 @@
-"""Beyond the paper (issue 9): approximation and transfer error against the number of
+"""Beyond the paper: approximation and transfer error against the number of
 non-zeros, with the paper's BSF scales and with ``taus="adaptive"``, against the spectral
 projection with as many coefficients.
 
 Transfers use the ground-truth map (paper Eq. 11–12) and an estimated map (WKS + 5 landmarks
 + ZoomOut, [`bsfjax.estimate_map`][bsfjax.estimate_map]), whose BSF transfer is done both by re-binarization
-and through the refined point map.  Report: the issue's target ratios, error and non-zero
+and through the refined point map.  Report: the target ratios against the projection, error and
+non-zero
 tables, one figure with three panels (approximation, GT-map transfer, estimated-map
 transfer).
 """
@@ -56,23 +57,25 @@ def sparse_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 100,
       BSF transfer is done both ways, ``frame_transfer = "binary"`` (Eq. 11–12 with the
       estimated ``C``) and ``"p2p"`` (atoms pulled back through the refined point map).
 
-    Arguments:
-        dataset: the ``--data`` folder (`load_dataset`).
-        pairs: number of pairs.
-        functions: random indicators per source shape.
-        k: basis size (int ≥ 2).
-        sparsities: OMP's S values and the projection's coefficient counts (each ≤ k; the
-            projection also runs with all k).
-        lasso_targets: atom counts of the lasso runs (``target_atoms``); empty: no lasso.
-        n_bsf: BSF centres (share of the vertices or count).
-        seed: seed of the pairs, the functions and the FPS.
-        cache_dir: eigenbasis cache folder.
-        progress: show a progress bar.
+    **Arguments:**
 
-    Returns:
-        Rows ``{"source", "target", "class", "k", "frame", "method", "sparsity", "nonzeros",
-        "maps", "frame_transfer", "function", "approx_error", "error"}`` (``frame = "-"`` and
-        ``frame_transfer = "-"`` for ``std``).
+    - `dataset`: the ``--data`` folder (`load_dataset`).
+    - `pairs`: number of pairs.
+    - `functions`: random indicators per source shape.
+    - `k`: basis size (int ≥ 2).
+    - `sparsities`: OMP's S values and the projection's coefficient counts (each ≤ k; the
+      projection also runs with all k).
+    - `lasso_targets`: atom counts of the lasso runs (``target_atoms``); empty: no lasso.
+    - `n_bsf`: BSF centres (share of the vertices or count).
+    - `seed`: seed of the pairs, the functions and the FPS.
+    - `cache_dir`: eigenbasis cache folder.
+    - `progress`: show a progress bar.
+
+    **Returns:**
+
+    Rows ``{"source", "target", "class", "k", "frame", "method", "sparsity", "nonzeros",
+    "maps", "frame_transfer", "function", "approx_error", "error"}`` (``frame = "-"`` and
+    ``frame_transfer = "-"`` for ``std``).
     """
     sparsities = _check_ks(sparsities, "sparsities") if len(tuple(sparsities)) else ()
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 2:
@@ -135,7 +138,8 @@ def sparse_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 100,
 
 
 def _sparse_claims(rows, k: int) -> str:
-    """The issue's "must show" ratios, from the rows (means over all pairs and functions)."""
+    """The target ratios against the projection with k coefficients, from the rows (means
+    over all pairs and functions)."""
     def mean(value, **filt):
         v = [r[value] for r in rows if all(r[a] == b for a, b in filt.items())]
         return float(np.mean(v)) if v else float("nan")
@@ -209,7 +213,7 @@ def run(dataset: Dataset, *, pairs, functions, ks, seed, cache_dir, progress) ->
 
 
 def report(rows: list[dict], ks) -> Report:
-    """The issue's targets, error / non-zero tables, three panels; a k-specific settings line."""
+    """The target ratios, error / non-zero tables, three panels; a k-specific settings line."""
     k = ks[0]
     settings = (f"k = {k}, n_BSF = 5 % (Euclidean FPS), γ = 0.75, area-weighted "
                 "coding; frames: paper τ = (0.001, 0.005, 0.01) and "

@@ -32,20 +32,22 @@ def approximation_experiment(dataset: Dataset, *, pairs: int = 2, functions: int
                              progress: bool = True) -> list[dict]:
     """Table 1: approximation error on the source shapes of ``pairs`` pairs, per method and k.
 
-    Arguments:
-        dataset: the ``--data`` folder (`load_dataset`).
-        pairs: number of pairs (their source shapes are coded).
-        functions: random indicators per shape.
-        ks: basis sizes.
-        methods: a subset of `APPROX_METHODS`.
-        params: engine settings (`._engine.settings`; ``None``: the paper's).
-        n_bsf: BSF centres (share of the vertices or count).
-        seed: seed of the pairs, the functions and the FPS.
-        cache_dir: eigenbasis cache folder.
-        progress: show progress bars.
+    **Arguments:**
 
-    Returns:
-        Rows ``{"shape", "k", "method", "function", "area_share", "error"}``.
+    - `dataset`: the ``--data`` folder (`load_dataset`).
+    - `pairs`: number of pairs (their source shapes are coded).
+    - `functions`: random indicators per shape.
+    - `ks`: basis sizes.
+    - `methods`: a subset of `APPROX_METHODS`.
+    - `params`: engine settings (`._engine.settings`; ``None``: the paper's).
+    - `n_bsf`: BSF centres (share of the vertices or count).
+    - `seed`: seed of the pairs, the functions and the FPS.
+    - `cache_dir`: eigenbasis cache folder.
+    - `progress`: show progress bars.
+
+    **Returns:**
+
+    Rows ``{"shape", "k", "method", "function", "area_share", "error"}``.
     """
     params = _engine.settings() if params is None else params
     ks = _check_ks(ks)

@@ -69,23 +69,25 @@ def transfer_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 10
     """Table 2 (``maps="gt"``) or its estimated-map version (``maps="estimated"``): transfer
     error on ``pairs`` pairs with square ``k × k`` maps.
 
-    Arguments:
-        dataset: the ``--data`` folder (`load_dataset`).
-        pairs: number of pairs.
-        functions: random indicators per source shape.
-        ks: basis sizes (square maps).
-        methods: a subset of `TRANSFER_METHODS`.
-        params: engine settings (`._engine.settings`; ``None``: the paper's).
-        maps: ``"gt"`` (ground truth) or ``"estimated"`` (WKS + 5 landmarks).
-        n_bsf: BSF centres (share of the vertices or count).
-        seed: seed of the pairs, the functions and the FPS.
-        cache_dir: eigenbasis cache folder.
-        progress: show progress bars.
-        approximation: also report the approximation error on the source.
+    **Arguments:**
 
-    Returns:
-        Rows ``{"source", "target", "class", "k", "k_target", "method", "function", "error",
-        "maps"}`` (plus ``"approx_error"`` with ``approximation=True``, NaN for ``p2p``).
+    - `dataset`: the ``--data`` folder (`load_dataset`).
+    - `pairs`: number of pairs.
+    - `functions`: random indicators per source shape.
+    - `ks`: basis sizes (square maps).
+    - `methods`: a subset of `TRANSFER_METHODS`.
+    - `params`: engine settings (`._engine.settings`; ``None``: the paper's).
+    - `maps`: ``"gt"`` (ground truth) or ``"estimated"`` (WKS + 5 landmarks).
+    - `n_bsf`: BSF centres (share of the vertices or count).
+    - `seed`: seed of the pairs, the functions and the FPS.
+    - `cache_dir`: eigenbasis cache folder.
+    - `progress`: show progress bars.
+    - `approximation`: also report the approximation error on the source.
+
+    **Returns:**
+
+    Rows ``{"source", "target", "class", "k", "k_target", "method", "function", "error",
+    "maps"}`` (plus ``"approx_error"`` with ``approximation=True``, NaN for ``p2p``).
     """
     params = _engine.settings() if params is None else params
     ks = _check_ks(ks)

@@ -53,20 +53,22 @@ def frame_time_experiment(dataset: Dataset, *, pairs: int = 2, ks=DEFAULT_KS, pa
     is timed separately as ``eigenbasis``.  Times are medians of ``repeats`` runs after one
     warm-up (compilation) run; rows also give the first-call time.
 
-    Arguments:
-        dataset: the ``--data`` folder (`load_dataset`).
-        pairs: number of pairs (their source shapes are timed).
-        ks: basis sizes of ``heat`` and ``ours`` (the eigenbasis is computed at the largest).
-        params: engine settings (`._engine.settings`; ``None``: the paper's).
-        n_bsf: BSF centres (share of the vertices or count).
-        seed: seed of the pairs and the FPS.
-        cache_dir: unused (the eigenbasis is timed, so never read from a cache).
-        repeats: timed calls after the warm-up.
-        progress: show a progress bar.
+    **Arguments:**
 
-    Returns:
-        Rows ``{"shape", "n_vertices", "n_centers", "method", "k", "n_atoms", "first_s",
-        "time_s"}``.
+    - `dataset`: the ``--data`` folder (`load_dataset`).
+    - `pairs`: number of pairs (their source shapes are timed).
+    - `ks`: basis sizes of ``heat`` and ``ours`` (the eigenbasis is computed at the largest).
+    - `params`: engine settings (`._engine.settings`; ``None``: the paper's).
+    - `n_bsf`: BSF centres (share of the vertices or count).
+    - `seed`: seed of the pairs and the FPS.
+    - `cache_dir`: unused (the eigenbasis is timed, so never read from a cache).
+    - `repeats`: timed calls after the warm-up.
+    - `progress`: show a progress bar.
+
+    **Returns:**
+
+    Rows ``{"shape", "n_vertices", "n_centers", "method", "k", "n_atoms", "first_s",
+    "time_s"}``.
     """
     params = _engine.settings() if params is None else params
     ks = _check_ks(ks)

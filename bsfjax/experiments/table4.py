@@ -39,20 +39,22 @@ def transfer_time_experiment(dataset: Dataset, *, pairs: int = 2, ks=DEFAULT_KS,
     a point map and the pull-back; for ``geod`` the geodesic distances from the centres too.
     The map estimation is timed once per pair as ``fmap (estimate_fmap)``.
 
-    Arguments:
-        dataset: the ``--data`` folder (`load_dataset`).
-        pairs: number of pairs.
-        ks: basis sizes (square estimated maps).
-        methods: a subset of `TRANSFER_METHODS`.
-        params: engine settings (`._engine.settings`; ``None``: the paper's).
-        n_bsf: BSF centres (share of the vertices or count).
-        seed: seed of the pairs, the function and the FPS.
-        cache_dir: eigenbasis cache folder.
-        repeats: timed calls after the warm-up.
-        progress: show a progress bar.
+    **Arguments:**
 
-    Returns:
-        Rows ``{"source", "target", "n_source", "k", "method", "first_s", "time_s"}``.
+    - `dataset`: the ``--data`` folder (`load_dataset`).
+    - `pairs`: number of pairs.
+    - `ks`: basis sizes (square estimated maps).
+    - `methods`: a subset of `TRANSFER_METHODS`.
+    - `params`: engine settings (`._engine.settings`; ``None``: the paper's).
+    - `n_bsf`: BSF centres (share of the vertices or count).
+    - `seed`: seed of the pairs, the function and the FPS.
+    - `cache_dir`: eigenbasis cache folder.
+    - `repeats`: timed calls after the warm-up.
+    - `progress`: show a progress bar.
+
+    **Returns:**
+
+    Rows ``{"source", "target", "n_source", "k", "method", "first_s", "time_s"}``.
     """
     params = _engine.settings() if params is None else params
     ks = _check_ks(ks)

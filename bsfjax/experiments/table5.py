@@ -31,20 +31,22 @@ def tosca_experiment(dataset: Dataset, *, pairs: int = 2, functions: int = 100, 
     ``pairs`` is the number of pairs *per class*.  Methods without BSF parameters (``std``,
     ``std2``, ``p2p``, ``prod``) run once and are reported with ``param_set = "-"``.
 
-    Arguments:
-        dataset: the ``--data`` folder with class subfolders (`load_dataset`).
-        pairs: number of pairs per class.
-        functions: random indicators per source shape.
-        ks: basis sizes (square estimated maps).
-        methods: a subset of `TRANSFER_METHODS`.
-        parameter_sets: ``{name: {"n_bsf": ..., "params": settings}}``; ``None``:
-            `PARAMETER_SETS`.
-        seed: seed of the pairs, the functions and the FPS.
-        cache_dir: eigenbasis cache folder.
-        progress: show progress bars.
+    **Arguments:**
 
-    Returns:
-        Rows of `transfer_experiment` (``maps = "estimated"``) plus ``"param_set"``.
+    - `dataset`: the ``--data`` folder with class subfolders (`load_dataset`).
+    - `pairs`: number of pairs per class.
+    - `functions`: random indicators per source shape.
+    - `ks`: basis sizes (square estimated maps).
+    - `methods`: a subset of `TRANSFER_METHODS`.
+    - `parameter_sets`: ``{name: {"n_bsf": ..., "params": settings}}``; ``None``:
+      `PARAMETER_SETS`.
+    - `seed`: seed of the pairs, the functions and the FPS.
+    - `cache_dir`: eigenbasis cache folder.
+    - `progress`: show progress bars.
+
+    **Returns:**
+
+    Rows of `transfer_experiment` (``maps = "estimated"``) plus ``"param_set"``.
     """
     ks = _check_ks(ks)
     methods = _check_methods(methods, TRANSFER_METHODS)

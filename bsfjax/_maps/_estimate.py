@@ -1,0 +1,155 @@
+"""What one call of [`MapEstimator`][bsfjax.MapEstimator] works on and returns: the
+[`MapEstimate`][bsfjax.MapEstimate], the call's problem shared by its phases, and the checks of its
+inputs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import numpy as np
+
+from ._distortion import _Geodesics
+from ._orientation import orientation_bases
+from .._sampling import Subsample
+from .._spectral import Spectrum, map_to_unit_area
+from .._util import BSFError, check_indices, check_int, check_real
+
+__all__ = ["MapEstimate", "check_landmark_pairs", "check_starts"]
+
+
+class MapEstimate(NamedTuple):
+    """The result of a [`MapEstimator`][bsfjax.MapEstimator] (and of
+    [`estimate_map`][bsfjax.estimate_map])."""
+
+    C: np.ndarray  #: ``(k, k)`` functional map source → target
+    p2p: np.ndarray  #: ``(n_N,)`` point map, target vertex → source vertex
+    C_initial: np.ndarray  #: the descriptor-based map before ZoomOut (``k₀ × k₀``: its start's)
+    #: ``(source, target)`` [`Subsample`][bsfjax.Subsample] s ZoomOut ran on (``None``: every
+    #: vertex); ``"refined"`` continues on them (``transfer_labels(..., samples=)``)
+    samples: tuple | None = None
+    #: with several starts (no landmarks): the kept map's geodesic distortion
+    #: ([`bsfjax.map_distortion`][bsfjax.map_distortion]) and orientation agreement
+    #: ([`bsfjax.orientation_agreement`][bsfjax.orientation_agreement]), the start ``(k₀, WKS variance)`` chosen among
+    #: them, and the landmark pairs read off its map when the estimate made with them was kept;
+    #: ``None`` with landmarks or a single start
+    distortion: float | None = None
+    orientation: float | None = None
+    start: tuple | None = None
+    landmarks: tuple | None = None
+    #: with several starts and the turn check: whether the kept map is the alternative with
+    #: left and right swapped (the chosen map was turned front to back); ``None`` otherwise
+    swapped: bool | None = None
+    #: with the turn check: whether its two measures disagree about which of its two maps is
+    #: turned (the local distortion prefers one, the orientation agreement the other, within
+    #: the estimator's ``orientation_slack`` of each other).  The kept map is then a guess and
+    #: may be turned front to back: give two landmark pairs.  On 120 FAUST / FAUST_5k pairs
+    #: without landmarks it was ``True`` on 8, and the kept map was turned on 3 of them (of
+    #: the 5 turned maps kept in all) and partly wrong on 2 (docs/results/segmentation.md,
+    #: "Without landmarks").  ``None`` without the check, or on a target too coarse for it
+    turn_doubtful: bool | None = None
+
+
+class Run(NamedTuple):
+    """One estimate: its initial map ``C0``, its point map (``-1`` where not searched) and the
+    map after ZoomOut it came from."""
+
+    C0: object
+    p2p: np.ndarray
+    C_ref: object
+
+
+@dataclasses.dataclass
+class Problem:
+    """One call's problem: the unit-area spectra and their meshes, ZoomOut's samples, where
+    the candidates are compared (``rows``, ``faces``: `selection_rows`), and what the
+    phases share, computed once on first use (the orientation bases, the Dijkstra runs)."""
+
+    source: Spectrum
+    target: Spectrum
+    source_mesh: object
+    target_mesh: object
+    refine_to: int
+    samples: tuple | None
+    rows: np.ndarray | None
+    faces: np.ndarray | None
+    k_bases: int  # the largest k₀ of the estimates that use the orientation bases
+    _bases: object = None
+    _geodesics: tuple | None = None
+
+    @property
+    def meshes(self) -> bool:
+        return self.source_mesh is not None and self.target_mesh is not None
+
+    def bases(self):
+        """The pair's orientation bases, one face scan for every estimate that uses them."""
+        if self._bases is None:
+            self._bases = orientation_bases(self.source, self.target, self.source_mesh,
+                                            self.target_mesh, self.k_bases)
+        return self._bases
+
+    def geodesics(self) -> tuple:
+        """The distortions' shared Dijkstra runs (each vertex of a shape run once)."""
+        if self._geodesics is None:
+            self._geodesics = (_Geodesics(self.source_mesh), _Geodesics(self.target_mesh))
+        return self._geodesics
+
+
+def to_given(X, am, an) -> np.ndarray:
+    """A map of the unit-area bases back in the given bases."""
+    X = np.asarray(X)
+    return np.asarray(map_to_unit_area(X, am, an, inverse=True), X.dtype)
+
+
+def check_symmetry(source_symmetry, n_m: int):
+    if source_symmetry is None:
+        return None
+    source_symmetry = np.asarray(source_symmetry)
+    if source_symmetry.shape != (n_m,):
+        raise BSFError(f"source_symmetry must have one source vertex per source vertex "
+                       f"({n_m}), got shape {source_symmetry.shape}")
+    return check_indices(source_symmetry, "source_symmetry", n_m, what="source vertex indices")
+
+
+def check_landmark_pairs(landmarks, n_m: int, n_n: int):
+    if landmarks is None:
+        return None
+    src, tgt = (np.asarray(x) for x in landmarks)
+    if src.ndim != 1 or tgt.ndim != 1 or src.shape != tgt.shape or src.size == 0:
+        raise BSFError(f"landmarks must be two lists of equal length, got {src.size} source and "
+                       f"{tgt.size} target indices")
+    return (check_indices(src, "source landmarks", n_m),
+            check_indices(tgt, "target landmarks", n_n))
+
+
+def check_pair_samples(samples, n_m: int, n_n: int) -> tuple:
+    """Given ``(source, target)`` subsamples, each with one cell per vertex of its shape."""
+    ok = len(samples) == 2 and all(isinstance(s, Subsample) for s in samples)
+    if not ok or samples[0].cells.shape != (n_m,) or samples[1].cells.shape != (n_n,):
+        raise BSFError(f"zoomout_samples must be an int, None, or (source, target) Subsamples "
+                       f"of {n_m} and {n_n} vertices")
+    return samples
+
+
+def check_starts(starts, refine_to: int, single: tuple, default) -> tuple:
+    """The ``(k₀, variance)`` starts with ``k₀ ≤ refine_to``, checked; ``None`` gives
+    ``default`` (or ``single`` where ``default`` is ``None`` or has no such start)."""
+    given = starts is not None
+    try:
+        pairs = [tuple(p) for p in (starts if given else default or single)]
+    except TypeError:
+        raise BSFError(f"starts must be a sequence of (k0, variance) pairs, got {starts!r}") \
+            from None
+    out = []
+    for p in pairs:
+        if len(p) != 2:
+            raise BSFError(f"starts must be (k0, variance) pairs, got {p!r}")
+        k0 = check_int(p[0], "a start's k0", 1)
+        out.append((k0, check_real(p[1], "a start's WKS variance", positive=True)))
+    kept = tuple(p for p in dict.fromkeys(out) if p[0] <= refine_to)
+    if not kept:
+        if given:
+            raise BSFError(f"no start has k0 <= refine_to = {refine_to}: {starts!r}")
+        kept = single
+    return kept

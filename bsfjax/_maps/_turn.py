@@ -1,0 +1,133 @@
+"""The pieces [`MapEstimator`][bsfjax.MapEstimator] shares between its phases and its turn check: a
+shape's intrinsic mirror symmetry, landmark pairs read off a point map, where candidate maps
+are compared on a large target, and the descriptors of one start.
+
+Each function takes the estimator (its fields) as its first argument; the estimator's own
+methods ([`MapEstimator.mirror_symmetry`][bsfjax.MapEstimator.mirror_symmetry]) check the inputs first.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ._descriptors import wks
+from ._distortion import _agreements, _distortions, choose_map
+from ._estimation import FmapWeights, estimate_fmap
+from ._fmap import fmap_to_p2p, zoomout
+from ._orientation import orientation_bases
+from .._sampling import farthest_point_sampling
+from .._spectral import Spectrum
+from .._util import BSFError
+
+
+def self_map(est, spectrum: Spectrum, mesh, refine_to: int, samples, rows) -> np.ndarray:
+    """The mirror symmetry ``S: M → M`` (docstring of
+    [`MapEstimator.mirror_symmetry`][bsfjax.MapEstimator.mirror_symmetry]), the inputs checked:
+    ``refine_to`` resolved, ``samples`` a [`Subsample`][bsfjax.Subsample] or ``None``."""
+    # the orientation is checked on every face, or on a large mesh on the selection of
+    # faces (and the distortions' samples), where the self-map is searched
+    checked, faces = selection_rows(est, mesh)
+    single = (est.k, est.wks_variance)
+    C = _self_fmap(est, spectrum, mesh, refine_to, samples, single)
+    p2p = _self_p2p(C, spectrum, checked)
+    extra = [s for s in est.landmark_free_starts if s[0] <= refine_to and s != single]
+    if extra and _agreements(mesh, mesh, p2p[None], faces)[0] > est.orientation_slack:
+        # not a mirror image: every start, one scan over the faces for them all
+        bases = orientation_bases(spectrum, spectrum, mesh, mesh, max(s[0] for s in extra))
+        fmaps = [C] + [_self_fmap(est, spectrum, mesh, refine_to, samples, s, bases)
+                       for s in extra]
+        del bases
+        maps = np.stack([p2p] + [_self_p2p(F, spectrum, checked) for F in fmaps[1:]])
+        reversal = 1.0 - _agreements(mesh, mesh, maps, faces)
+        best = choose_map(_distortions(mesh, mesh, maps, est.distortion_samples, None),
+                          reversal, slack=est.orientation_slack)
+        C, p2p = fmaps[best], maps[best]
+    if checked is None and rows is None:  # (searched over every vertex already)
+        return p2p
+    return np.asarray(fmap_to_p2p(C, spectrum, spectrum, rows=rows)).astype(np.int64)
+
+
+def _self_fmap(est, spectrum: Spectrum, mesh, refine_to: int, samples, start, bases=None):
+    """One start of the self-map: WKS at ``start = (k₀, variance)``, the estimate with the
+    orientation-reversing term at ``k₀ × k₀``, ZoomOut to ``refine_to``."""
+    k0, variance = start
+    d = wks(spectrum, est.n_energies, k=k0, variance=variance)
+    geometry = dict(source_mesh=mesh, target_mesh=mesh) if bases is None else \
+        dict(orientation_bases=bases)
+    C0 = estimate_fmap(spectrum, spectrum, d, d, k=k0,
+                       weights=FmapWeights(orient=est.orient_weight), orientation="reversing",
+                       **geometry)
+    if refine_to <= k0:
+        return C0
+    return zoomout(C0, spectrum, spectrum, refine_to, step=est.zoomout_step,
+                   samples=None if samples is None else (samples, samples))
+
+
+def _self_p2p(C, spectrum: Spectrum, checked) -> np.ndarray:
+    """The self point map of ``C`` at the ``checked`` vertices (every vertex for ``None``),
+    ``-1`` elsewhere."""
+    p2p = np.full(spectrum.n_vertices, -1, np.int64)
+    p2p[slice(None) if checked is None else checked] = np.asarray(
+        fmap_to_p2p(C, spectrum, spectrum, rows=checked))
+    return p2p
+
+
+def selection_rows(est, target_mesh) -> tuple:
+    """``(rows, faces)``: where the estimator compares candidate maps on a target of more
+    than ``est.selection_vertices`` vertices: the corners of ``est.selection_faces`` random
+    faces (seed 0; the orientation agreement is their area-weighted share) and the samples of
+    the distortions.  ``(None, None)`` (every vertex and face) on a smaller target."""
+    if target_mesh.n_vertices <= est.selection_vertices:
+        return None, None
+    faces = np.sort(np.random.default_rng(0).choice(
+        target_mesh.n_faces, min(est.selection_faces, target_mesh.n_faces), replace=False))
+    samples = [farthest_point_sampling(target_mesh, n)
+               for n in (est.distortion_samples, est.turn_samples)]
+    rows = np.unique(np.concatenate([target_mesh.faces[faces].ravel(), *samples]))
+    return rows.astype(np.int64), faces
+
+
+def measures_disagree(est, local, orient) -> bool:
+    """Whether the local distortion and the orientation agreement of the turn check's two maps
+    prefer different maps, both maps within the orientation slack (where
+    [`choose_map`][bsfjax.choose_map] goes by the local distortion alone)."""
+    if abs(orient[0] - orient[1]) > est.orientation_slack:
+        return False
+    return bool((local[0] <= local[1]) != (orient[0] >= orient[1]))
+
+
+def landmarks_from_map(source_mesh, p2p, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` landmark pairs read off a point map ``T: N → M``: the source's ``n`` farthest
+    points (Euclidean, seed 0), each with the target vertex whose image ``T(j)`` lies nearest
+    to it in the source's space (of several with that image, the first).  Target vertices
+    where ``p2p`` is ``-1`` (not searched: `selection_rows`) do not count."""
+    src = np.asarray(farthest_point_sampling(source_mesh, n), np.int64)
+    v = np.asarray(source_mesh.vertices, np.float64)
+    p2p = np.asarray(p2p)
+    known = np.flatnonzero(p2p >= 0)
+    images, first = np.unique(p2p[known], return_index=True)  # (ties: the first target)
+    return src, known[first[cKDTree(v[images]).query(v[src])[1]]].astype(np.int64)
+
+
+def descriptors(spectrum: Spectrum, n_energies: int, k0: int, variance: float, landmarks):
+    """A shape's descriptors for [`estimate_fmap`][bsfjax.estimate_fmap]: WKS, and WKS centred at
+    ``landmarks`` (if any) beside them.  The parts are freed once joined: on a large shape with
+    many landmarks they are most of the estimate's memory."""
+    plain = wks(spectrum, n_energies, k=k0, variance=variance)
+    if landmarks is None:
+        return plain
+    return jnp.concatenate([plain, wks(spectrum, n_energies, landmarks=landmarks, k=k0,
+                                       variance=variance)], axis=1)
+
+
+def check_sizes(k, refine_to, km: int) -> int:
+    """``k`` and ``refine_to`` (default ``km``) checked against the ``km`` eigenpairs there
+    are; returns ``refine_to``."""
+    if not isinstance(k, (int, np.integer)) or not 1 <= k <= km:
+        raise BSFError(f"k must be an integer in [1, {km}] (the spectra's size), got {k!r}")
+    refine_to = km if refine_to is None else refine_to
+    if not isinstance(refine_to, (int, np.integer)) or not k <= refine_to <= km:
+        raise BSFError(f"refine_to must be an integer in [{k}, {km}], got {refine_to!r}")
+    return refine_to
