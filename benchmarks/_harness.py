@@ -292,7 +292,7 @@ def name_list(text: str) -> list[str]:
 # --- workloads shared by several benchmarks --------------------------------------------------
 
 
-#: Issue 14's nine pairs (six FAUST, three FAUST_5k), by registration number.
+#: The segmentation benchmark's nine pairs (six FAUST, three FAUST_5k), by registration number.
 SEGMENTATION_PAIRS = {"faust": [("000", "001"), ("010", "012"), ("020", "022"), ("000", "010"),
                                 ("001", "021"), ("012", "022")],
                       "faust_5k": [("000", "001"), ("000", "010"), ("001", "011")]}

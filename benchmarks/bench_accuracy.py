@@ -1,4 +1,4 @@
-"""Accuracy benchmark of issue 3: approximation (Eq. 14) and ground-truth transfer (Eq. 15) errors.
+"""Accuracy benchmark: approximation (Eq. 14) and ground-truth transfer (Eq. 15) errors.
 
 For FAUST pairs from ../shared/data/faust, k ∈ {10, 30, 50, 70, 90} and random connected
 indicator functions covering 5–25 % of the area, the mean area-weighted relative error
@@ -52,7 +52,7 @@ def main(argv=None) -> int:
     beats = [f"- k = {s['k']}: {s['method']} {s['mean']:.3f} vs std {std[s['k']]:.3f} "
              f"({'beats' if s['mean'] < std[s['k']] else 'does NOT beat'} the projection)"
              for s in approx if s["method"] != "std"]
-    md = (f"# Accuracy (issue 3)\n\nFAUST pairs {pairs}, {args.functions} random connected "
+    md = (f"# Accuracy\n\nFAUST pairs {pairs}, {args.functions} random connected "
           f"indicators (5–25 % of the area) per pair, seed {args.seed}; mean of "
           "‖f − f̃‖_A / ‖f‖_A.\n\n## Approximation (Eq. 14)\n\n"
           + pivot_markdown(rows, "method", "k", value="approx_error")

@@ -1,11 +1,11 @@
-"""One source to many targets (issue 16): one ``bsfjax transfer ... --out-dir`` call against
+"""One source to many targets: one ``bsfjax transfer ... --out-dir`` call against
 separate ``bsfjax transfer ... --out`` calls, seconds per target after start-up, compilations.
 
     python benchmarks/bench_collection.py --out R [--quick] [--batch B] [--one-start]
 
 Sets (meshes from ../shared/data, read by path, nothing copied into the repository):
 
-- ``six``: the issue's check — six FAUST-like targets of six vertex counts (3.4K–6.9K): FAUST
+- ``six``: six FAUST-like targets of six vertex counts (3.4K–6.9K): FAUST
   registrations 001, 002, 010, 011, 012, 021 decimated by 0–50 % with ``fast-simplification``
   (a benchmark-only dependency: ``pip install fast-simplification``), SMPL part labels from the
   source FAUST 000, truth = the label of the nearest registration vertex.
@@ -22,7 +22,7 @@ compiled (a second pass) with the number of compilations of the first pass.
 in-process passes (``batch=B``) run B targets per device under ``vmap`` (for accelerators).
 ``--one-start``: every run with ``--one-start`` (``starts=((k, 7.0),)``): without landmarks
 the map from one start, through the batched stages, instead of ``estimate_map``'s choice among
-15 starts per target (the default since stop 32; the sets here have no landmarks).
+15 starts per target (the default; the sets here have no landmarks).
 """
 
 from __future__ import annotations

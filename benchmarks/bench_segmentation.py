@@ -1,4 +1,4 @@
-"""Issue 14's check: SMPL parts carried across FAUST and FAUST_5k pairs by every method.
+"""SMPL parts carried across FAUST and FAUST_5k pairs by every method.
 
 Runs :func:`bsfjax.experiments.segmentation.segmentation_experiment` on named pairs of
 ``../shared/data`` (six FAUST pairs, same person and other person; three FAUST_5k pairs), all
@@ -36,7 +36,7 @@ the three maps. Writes ``segmentation_stretched.csv`` and ``segmentation_stretch
 
 ``--no-landmarks``: p2p and ``refined`` on the nine pairs through the map ``bsfjax transfer``
 estimates without ``--landmarks`` (several starts, landmarks read off the kept map) and through
-the single start it estimated until stop 32; then the two estimates' seconds on FAUST 000→010
+a single start; then the two estimates' seconds on FAUST 000→010
 (median of ``--repeats`` warm calls, the same run).  Writes ``segmentation_nolandmarks.csv``
 and ``segmentation_nolandmarks.md``.
 
@@ -46,7 +46,7 @@ ground-truth images): how many a user needs.  Writes ``segmentation_fewlandmarks
 ``.md``.
 
 ``--held-out``: instead of the nine pairs, ten that no default was chosen on (eight FAUST,
-two FAUST_5k; stop 32's held-out check); with ``--no-landmarks`` or ``--few-landmarks`` (or
+two FAUST_5k); with ``--no-landmarks`` or ``--few-landmarks`` (or
 alone: the default map).  The files' names end in ``_heldout``.
 
 ``--triangles``: the SMPL parts given per triangle (each triangle takes the label of the
@@ -67,8 +67,8 @@ template's vertex order).  About 6 minutes on 2 cores.  Writes ``segmentation_cr
 
 ``--all-pairs``: p2p and ``refined`` on every ordered pair of each folder (72 FAUST, 12
 FAUST_5k), through the default map and the map estimated without landmarks (about 11 minutes
-on 2 cores), summarized per folder, map and FAUST pair kind against issue 14's bar (``refined``
-≥ 97 % and ≥ p2p + 1).  Writes ``segmentation_allpairs.csv`` (one row per pair, map and
+on 2 cores), summarized per folder, map and FAUST pair kind against a bar of ``refined``
+≥ 97 % and ≥ p2p + 1.  Writes ``segmentation_allpairs.csv`` (one row per pair, map and
 method) and ``segmentation_allpairs.md``.
 """
 
@@ -90,7 +90,7 @@ from bsfjax.experiments.segmentation import (K_SPECTRA, METHODS, report,
                                              segmentation_experiment, segmentation_pair,
                                              shape_labels, template_vertices)
 
-#: Issue 14's nine pairs (six FAUST, three FAUST_5k).
+#: The nine pairs (six FAUST, three FAUST_5k).
 PAIRS = h.SEGMENTATION_PAIRS
 #: Pairs no default was chosen on (``--held-out``).
 HELD_OUT = {"faust": [("000", "012"), ("001", "010"), ("002", "020"), ("011", "021"),
@@ -253,7 +253,7 @@ def no_landmarks_report(rows, data: Path, out: Path, args, tail: str = "") -> in
                                                            med.items()) +
               f" ({med['several starts (default)'] / med['one start']:.1f}× the one start); "
               f"{chosen}. Its 15 starts' estimates (WKS given): {scans[0]:.2f} s with the meshes "
-              f"(a face scan per estimate, until stop 35), {scans[1]:.2f} s with the pair's "
+              f"(a face scan per estimate), {scans[1]:.2f} s with the pair's "
               f"orientation_bases (one scan per shape, included; {scans[0] / scans[1]:.2f}× "
               f"faster; the same maps); {h.cpus_note(load=True)}.")
     write_text(out / f"segmentation_nolandmarks{tail}.md", rep.markdown + "\n\n" + timing + "\n")
@@ -448,8 +448,8 @@ def main(argv=None) -> int:
     est = bj.estimate_map(sm.truncate(60), sn.truncate(60), k=30, landmarks=(lm, lm),
                           refine_to=60, source_mesh=src.mesh, target_mesh=tgt.mesh)
     lab = shape_labels(ds, 0, template)
-    # peers in the same run: the pull-back, and stop 27's default (the vote of the last three
-    # maps of a continuation on every vertex)
+    # peers in the same run: the pull-back, and the vote of the last three maps of a
+    # continuation on every vertex
     peers = {"refined": dict(samples=est.samples), "p2p": dict(method="p2p"),
              "refined, 3 maps on every vertex": dict(method=bj.RefinedPullBack(n_vote=3))}
     timed = {name: h.timed(lambda: bj.transfer_labels(sm, sn, lab, C=est.C, p2p=est.p2p, **kw),

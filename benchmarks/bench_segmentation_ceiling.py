@@ -1,4 +1,4 @@
-"""How far can any map go on issue 14's pairs?  Ceilings of the SMPL-part accuracy.
+"""How far can any map go on the segmentation pairs?  Ceilings of the SMPL-part accuracy.
 
 Two questions, answered on the pairs of ``bench_segmentation.py``:
 

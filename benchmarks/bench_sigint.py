@@ -1,4 +1,4 @@
-"""Ctrl-C at random moments of a FAUST transfer (issue 18): no segfault, no traceback, no
+"""Ctrl-C at random moments of a FAUST transfer: no segfault, no traceback, no
 partial or temporary file.
 
 Runs ``python -m bsfjax.cli transfer`` on two FAUST registrations (labels from the SMPL part

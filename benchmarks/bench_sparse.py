@@ -1,4 +1,4 @@
-"""Benchmark (issue 9): BSF transfer options with an estimated map, and float64 cross-checks.
+"""Benchmark: BSF transfer options with an estimated map, and float64 cross-checks.
 
 On FAUST pairs from ``../shared/data/faust`` (the ``reproduce`` pairs, seed 0), k = 50,
 ``taus="adaptive"`` (pruned) and the paper's scales, area-weighted OMP with S = 30 (and

@@ -1,4 +1,4 @@
-"""Benchmark: the cost of the input checks of issue 8, and a longer reader-fuzzing campaign.
+"""Benchmark: the cost of the input checks, and a longer reader-fuzzing campaign.
 
 * ``load_mesh`` on the real meshes, split into reading and the defect scan
   (``bsfjax.mesh_report``: duplicate vertices/faces, non-manifold edges, components);
