@@ -49,7 +49,7 @@ def test_merged_buckets_give_the_unpadded_results():
 
     small, large = bsfjax.example_pair(levels=1), bsfjax.example_pair(levels=2)
     targets = [small.target, large.target]
-    sizes = _merged_sizes(targets, lambda i: None, small.source.n_vertices)
+    sizes = _merged_sizes(targets, lambda i, mesh: None)
     assert sizes[0] == sizes[1] == (2048, size_bucket(large.target.n_faces))
     # one start: the maps from the padded stages (several: estimate_map's, never padded)
     runs = [dict(transfer_collection(small.source, small.labels, targets, method="p2p", k=10,

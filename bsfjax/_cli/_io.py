@@ -4,7 +4,9 @@ Labels may come as one integer per vertex (``.txt`` / ``.npy``), as SMPL's ``.js
 ``{part name: [vertex indices]}`` ([`bsfjax.load_labels`][bsfjax.load_labels]), or as one integer per triangle
 (``.seg``, or a ``.txt`` / ``.npy`` with as many entries as the source has triangles;
 [`bsfjax.transfer_face_labels`][bsfjax.transfer_face_labels]); a transfer of ``.json`` labels can be written as
-``.json`` with the source's part names ([`bsfjax.save_labels`][bsfjax.save_labels]).
+``.json`` with the source's part names ([`bsfjax.save_labels`][bsfjax.save_labels]).  Every such file
+is numbered by the rows of its mesh file, not by the vertices its reader kept
+([`Mesh.to_file_rows`][bsfjax.Mesh.to_file_rows]).
 """
 
 from __future__ import annotations
@@ -96,29 +98,49 @@ def read_truth(path: str, names):
     return np.asarray([index[n] for n in truth_names])[truth]
 
 
-def read_values(args, source):
+def read_values(args, source, on_mesh: bool = True):
     """The ``--labels`` (int, ``(n,)``) or ``--function`` (``(m, n)``) of a transfer from the
     mesh ``source``, checked; the labels' part names (``.json`` labels; else ``None``); and
     whether the labels are one per triangle (a ``.seg`` file, or as many labels as ``source``
-    has triangles and not vertices)."""
+    has triangles and not vertices).  The files are read in the rows of the source's file;
+    ``on_mesh``: the values are returned on the vertices (triangles) its reader kept, else in
+    those rows."""
     from .._mesh import is_face_file
 
-    names, per_face, n = None, False, source.n_vertices
+    import numpy as np
+
+    # every file is read in its rows: n (m) rows of the source's file, mapped onto the
+    # vertices (triangles) its reader kept
+    names, per_face, n, m = None, False, source.n_file_rows, source.n_file_faces
     if args.labels:
         values, names = read_labels(args.labels, "labels")
         per_face = is_face_file(args.labels) or (
-            not is_json(args.labels) and values.shape[-1] == source.n_faces != n)
-        if per_face and values.shape != (source.n_faces,):
+            not is_json(args.labels) and values.shape[-1] == m != n)
+        if per_face and values.shape != (m,):
             raise CLIError(f"labels file {args.labels}: a .seg file has one label per triangle "
-                           f"({source.n_faces} on the source mesh), got {values.shape[-1]}")
+                           f"({m} on the source mesh), got {values.shape[-1]}")
+        last = n - 1 if source.vertex_ids is None else int(source.vertex_ids[-1])
+        if is_json(args.labels) and last < values.shape[-1] < n:  # dropped rows in no part
+            values = np.concatenate([values, np.full(n - values.shape[-1], -1, values.dtype)])
     else:
         values = _read_array(args.function, "function")
-        values = values.T if values.ndim == 2 else values
-    if not per_face and values.shape[-1] != n:
-        also = f" and {source.n_faces} triangles" if args.labels else ""
-        raise CLIError(f"{'labels' if args.labels else 'function'} file has {values.shape[-1]} "
+    if not per_face and values.shape[0] != n:
+        also = f" and {m} triangles" if args.labels else ""
+        raise CLIError(f"{'labels' if args.labels else 'function'} file has {values.shape[0]} "
                        f"entries per function but the source mesh has {n} vertices{also}")
-    return values, names, per_face
+    if on_mesh:
+        values = source.from_file_rows(values, faces=per_face)
+    return (values.T if values.ndim == 2 else values), names, per_face
+
+
+def dropped_note(mesh, per_face: bool = False) -> str:
+    """``"; ..."``: the rows of ``mesh``'s file its reader dropped, which an output leaves at
+    -1 / NaN (empty when none)."""
+    n = mesh.dropped_faces if per_face else mesh.dropped_rows
+    if not n:
+        return ""
+    what = "triangles" if per_face else "rows"
+    return f" ({n} {what} of {mesh.name or 'the target'} carry no surface: -1 / NaN there)"
 
 
 def coloured_data(result, labels: bool) -> dict:
@@ -134,7 +156,8 @@ def coloured_data(result, labels: bool) -> dict:
         from matplotlib import colormaps
 
         v = result if result.ndim == 1 else result[:, 0]
-        lo, hi = float(np.min(v)), float(np.max(v))
+        seen = v[np.isfinite(v)]  # (NaN on the rows of the file without a vertex)
+        lo, hi = (float(seen.min()), float(seen.max())) if seen.size else (0.0, 1.0)
         rgb = colormaps["viridis"]((v - lo) / (hi - lo if hi > lo else 1.0))[:, :3]
         data = {"value": v}
     rgb8 = np.clip(np.round(255 * rgb), 0, 255).astype(np.uint8)

@@ -151,7 +151,7 @@ def cmd_transfer_many(args, error) -> int:
     from ._io import read_values
     from ._io import TURN_DOUBT, map_estimator
 
-    values, part_names, per_face = read_values(args, source)
+    values, part_names, per_face = read_values(args, source, on_mesh=False)  # file rows
     # .json labels come back as .json, triangles' labels as .seg
     suffix = ".seg" if per_face else ".txt" if part_names is None else ".json"
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -169,13 +169,13 @@ def cmd_transfer_many(args, error) -> int:
     print(f"{len(targets)} targets: {len(targets) - len(todo)} complete (skipped), {len(todo)} "
           f"to run" + (f" on {jax.process_count()} processes" if multi else ""), file=sys.stderr)
     records: dict[str, dict] = {}
-    failed = 0
+    failed = dropped = 0
     labels = args.labels is not None
     results = transfer_collection(
         source, values, [targets[i] for i in todo], labels=labels, faces=per_face,
         method=args.method, k=args.k,
         landmarks=lambda j: landmarks.get(todo[j]), threshold=args.threshold,
-        errors="report", spectrum_cache=args.spectrum_cache,
+        errors="report", spectrum_cache=args.spectrum_cache, file_rows=True,
         batch=1 if args.batch is None else args.batch, estimator=map_estimator(args, args.k))
     mine = len(process_share(range(len(todo))))
     bar = tqdm(total=mine, desc="targets", unit="target", disable=args.no_progress,
@@ -189,22 +189,25 @@ def cmd_transfer_many(args, error) -> int:
             tqdm.write(f"bsfjax transfer: {path}: error: {msg}", file=sys.stderr)
             records[path.stem] = {"target": str(path), "status": "error", "error": msg}
             continue
+        # every output has the rows of the target's file (-1 / NaN on the dropped ones)
+        target = res.mesh
         rec = {"target": str(path), "status": "ok", "vertices": res.n_vertices,
-               "map_energy": res.map_energy, "seconds": round(res.seconds, 4)}
+               "dropped_rows": target.dropped_rows, "map_energy": res.map_energy,
+               "seconds": round(res.seconds, 4)}
+        if per_face:
+            rec["dropped_triangles"] = target.dropped_faces
+        dropped += bool(target.dropped_faces if per_face else target.dropped_rows)
         if res.turn_doubtful is not None:
             rec["turn_doubtful"] = res.turn_doubtful
             if res.turn_doubtful:
                 tqdm.write(f"bsfjax transfer: {path}: warning: {TURN_DOUBT}", file=sys.stderr)
-        # the target mesh, read again only for the coloured mesh or a triangle truth's areas
-        target = (load_mesh(path) if mesh_dir is not None or (per_face and args.truth_dir)
-                  else None)
         if labels:
             rec.update(unassigned_share=res.unassigned_share, regime=res.regime,
                        confidence=res.confidence, agreement=res.agreement)
             truth = _truth(args.truth_dir, path.stem, len(res.labels), part_names, error,
                            per_face)
             if truth is not None:
-                mass = target.face_areas() if per_face else res.mass
+                mass = target.file_mesh().face_areas() if per_face else res.mass
                 rec["accuracy"] = float(np.sum(mass * (res.labels == truth)) / np.sum(mass))
             result = res.labels.astype(np.int64)
         else:
@@ -213,7 +216,7 @@ def cmd_transfer_many(args, error) -> int:
             from ._io import coloured_data
 
             coloured = coloured_data(result, labels)
-            save_mesh(mesh_dir / f"{path.stem}.ply", target, immediate=True,
+            save_mesh(mesh_dir / f"{path.stem}.ply", target.file_mesh(), immediate=True,
                       **({"cell_data": coloured} if per_face else {"point_data": coloured}))
         if labels:
             save_labels(out_dir / f"{path.stem}{suffix}", result, part_names, immediate=True)
@@ -224,8 +227,9 @@ def cmd_transfer_many(args, error) -> int:
     bar.close()
     _write_summary(out_dir, targets, records, multi)
     n_ok = sum(r["status"] == "ok" for r in records.values())
-    print(f"wrote {n_ok} targets to {out_dir}" + (f"; {failed} failed" if failed else ""),
-          file=sys.stderr)
+    print(f"wrote {n_ok} targets to {out_dir}" + (f"; {failed} failed" if failed else "")
+          + (f" ({dropped} with file rows that carry no surface: -1 / NaN there, counted in "
+             "summary.json)" if dropped else ""), file=sys.stderr)
     if multi:
         from jax.experimental import multihost_utils
 

@@ -6,8 +6,8 @@ import sys
 import warnings
 from pathlib import Path
 
-from ._io import (TURN_DOUBT, CLIError, _read_array, _write_array, coloured_data, is_json, map_estimator,
-                  read_truth, read_values)
+from ._io import (TURN_DOUBT, CLIError, _read_array, _write_array, coloured_data, dropped_note,
+                  is_json, map_estimator, read_truth, read_values)
 from .._mesh import is_face_file
 
 
@@ -74,8 +74,12 @@ def _transfer_one(args) -> int:
     if landmarks is not None:
         from .._util import check_indices
 
-        check_indices(landmarks[0], "--landmarks (source)", source.n_vertices)
-        check_indices(landmarks[1], "--landmarks (target)", target.n_vertices)
+        # given as rows of the mesh files: onto the vertices each reader kept
+        landmarks = tuple(mesh.file_row_index(check_indices(lm, f"--landmarks ({side})",
+                                                            mesh.n_file_rows),
+                                              f"--landmarks ({side})").tolist()
+                          for lm, side, mesh in zip(landmarks, ("source", "target"),
+                                                    (source, target)))
     values, names, per_face = read_values(args, source)
     if args.labels and (is_json(args.out) if per_face else is_face_file(args.out)):
         kinds = "triangle: write .seg," if per_face else "vertex: write .json,"
@@ -83,10 +87,12 @@ def _transfer_one(args) -> int:
     truth = None
     if args.truth:
         truth = read_truth(args.truth, names)
-        where, n = ("triangle", target.n_faces) if per_face else ("vertex", target.n_vertices)
+        where, n = (("triangle", target.n_file_faces) if per_face else
+                    ("vertex", target.n_file_rows))
         if truth.shape != (n,):
             raise CLIError(f"truth file {args.truth}: expected one label per target {where} "
                            f"({n}), got shape {truth.shape}")
+        truth = target.from_file_rows(truth, faces=per_face)
     k = args.k
     kmax = min(source.n_vertices, target.n_vertices) - 1
     if not 1 <= k <= kmax:
@@ -105,13 +111,14 @@ def _transfer_one(args) -> int:
         k_spec = min(max(k_spec, REFINE_EIGENPAIRS), kmax)
     if kind == "p2p":  # read and checked before the spectra, so a bad file costs nothing
         p2p = _read_array(rest[0], "p2p", dtype=int)
-        if p2p.shape != (target.n_vertices,):
-            raise CLIError(f"p2p file {rest[0]}: expected {target.n_vertices} source vertex indices in "
-                           f"[0, {source.n_vertices}), got shape {p2p.shape}")
+        if p2p.shape != (target.n_file_rows,):
+            raise CLIError(f"p2p file {rest[0]}: expected {target.n_file_rows} source vertex indices in "
+                           f"[0, {source.n_file_rows}), got shape {p2p.shape}")
         from .._util import check_indices
 
-        try:
-            p2p = check_indices(p2p, "p2p", source.n_vertices, what="source vertex indices")
+        try:  # one source row per target row: the kept rows, onto the kept source vertices
+            p2p = check_indices(p2p, "p2p", source.n_file_rows, what="source vertex indices")
+            p2p = source.file_row_index(target.from_file_rows(p2p), "p2p (source)")
         except ValueError as exc:
             raise CLIError(f"p2p file {rest[0]}: {exc}") from None
     sm = spectrum(source, k_spec, cache_dir=args.spectrum_cache)
@@ -176,10 +183,13 @@ def _transfer_one(args) -> int:
     else:
         result = transfer_values(sm, sn, values, **common)
         result = result.T if result.ndim == 2 else result
+    # every file written has the target file's rows: -1 / NaN where the reader dropped one
+    result = target.to_file_rows(result, faces=per_face)
     if args.mesh_out:
         coloured = coloured_data(result, bool(args.labels))
-        save_mesh(args.mesh_out, target, **({"cell_data": coloured} if per_face
-                                             else {"point_data": coloured}))
+        save_mesh(args.mesh_out, target.file_mesh(), **({"cell_data": coloured} if per_face
+                                                         else {"point_data": coloured}))
     _write_array(args.out, result, names)
-    print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else ""), file=sys.stderr)
+    print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else "")
+          + dropped_note(target, per_face), file=sys.stderr)
     return 0

@@ -10,13 +10,13 @@ from ._example import ExamplePair, JOINTS, LABEL_NAMES, POSES, example_mesh, exa
 from ._label_files import LabelFile, is_face_file, load_labels, read_label_file, save_labels
 from ._clean import MeshReport, clean_mesh, mesh_report
 from ._graph import edge_graph, graph_from_edges, mesh_edges, n_components
-from ._mesh import Mesh
+from ._mesh import FileRows, Mesh
 from ._readers import load_mesh
 from ._mesh_write import save_mesh
 from ._subdivision import subdivide
 
 __all__ = [
-    "ExamplePair", "JOINTS", "LABEL_NAMES", "LabelFile", "Mesh", "MeshReport", "POSES",
+    "ExamplePair", "FileRows", "JOINTS", "LABEL_NAMES", "LabelFile", "Mesh", "MeshReport", "POSES",
     "clean_mesh", "edge_graph", "example_mesh", "example_pair", "graph_from_edges",
     "is_face_file", "load_labels", "load_mesh", "mesh_edges", "mesh_report", "n_components",
     "read_label_file", "save_labels", "save_mesh", "subdivide",

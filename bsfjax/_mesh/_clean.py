@@ -13,7 +13,7 @@ import numpy as np
 
 from .._util import MeshError
 from ._graph import mesh_edges, n_components
-from ._mesh import Mesh
+from ._mesh import FileRows, Mesh
 
 __all__ = ["MeshReport", "mesh_report", "clean_mesh"]
 
@@ -99,7 +99,8 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, name: str | None = None,
 
     A face is degenerate when two of its indices coincide or its area is ``<= area_tol`` times the
     mean face area.  Vertices no face references are removed; ``Mesh.vertex_ids`` records the
-    original index of every kept vertex.
+    original index of every kept vertex and ``Mesh.file_rows`` what was dropped, so that
+    [`Mesh.to_file_rows`][bsfjax.Mesh.to_file_rows] gives per-vertex results the rows of the input.
     """
     where = f"{name}: " if name else ""
     probe = Mesh(vertices, faces, name=name)  # validates shapes, finiteness, indices
@@ -115,13 +116,20 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, name: str | None = None,
     used = np.zeros(v.shape[0], dtype=bool)
     used[f.ravel()] = True
     if not used.all():
+        rows = np.flatnonzero(~used)
+        shown = ", ".join(map(str, rows[:5])) + (", ..." if rows.size > 5 else "")
         warnings.warn(
-            f"{where}removed {int((~used).sum())} unreferenced vertices "
-            "(Mesh.vertex_ids maps kept vertices to file rows)",
+            f"{where}removed {rows.size} unreferenced vertices (file rows {shown}: no triangle "
+            "uses them; per-vertex files keep their rows, -1 or NaN there)",
             stacklevel=3,
         )
+    if degenerate.any() or not used.all():
+        rows = FileRows(n_rows=v.shape[0], dropped_vertices=v[~used], n_faces=probe.n_faces,
+                        face_ids=np.flatnonzero(~degenerate) if degenerate.any() else None,
+                        dropped_faces=probe.faces[degenerate])
         remap = np.cumsum(used) - 1
-        mesh = Mesh(v[used], remap[f], vertex_ids=np.flatnonzero(used), name=name)
+        mesh = Mesh(v[used], remap[f], vertex_ids=None if used.all() else np.flatnonzero(used),
+                    name=name, file_rows=rows)
     else:
         mesh = Mesh(v, f, name=name)
     _warn_defects(mesh, stacklevel=3)

@@ -11,12 +11,13 @@ the file readers and [`load_mesh`][bsfjax.load_mesh] in `bsfjax._mesh._readers`.
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
 from .._util import MeshError
 
-__all__ = ["Mesh", "MeshError", "MAX_COORDINATE"]
+__all__ = ["FileRows", "Mesh", "MeshError", "MAX_COORDINATE"]
 
 
 #: Largest accepted ``|coordinate|``.  Face areas are norms of cross products of edges, whose
@@ -30,6 +31,27 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
+class FileRows(NamedTuple):
+    """What a reader dropped from a mesh file (``Mesh.file_rows``): enough to give every output
+    the file's own rows and to write the mesh back as the file had it.
+
+    **Attributes:**
+
+    - `n_rows`: vertex rows of the file.
+    - `dropped_vertices`: ``(n_rows − n, 3)`` coordinates of the rows without a vertex, in
+      row order.
+    - `n_faces`: triangles of the file (after polygons were fan-triangulated).
+    - `face_ids`: ``(m,)`` the file triangle of each kept triangle, or ``None`` when all kept.
+    - `dropped_faces`: ``(n_faces − m, 3)`` the dropped triangles, as file rows.
+    """
+
+    n_rows: int
+    dropped_vertices: np.ndarray
+    n_faces: int
+    face_ids: np.ndarray | None
+    dropped_faces: np.ndarray
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Mesh:
     """An immutable triangle mesh.
@@ -41,8 +63,18 @@ class Mesh:
     - `vertex_ids`: ``(n,)`` int64 index of each vertex in the file it was read from, or
       ``None`` when vertex ``i`` is row ``i`` of the source.  ``load_mesh`` drops
       unreferenced vertices; per-vertex data indexed like the file (labels, ground-truth
-      correspondences) is brought onto the mesh with ``data[mesh.vertex_ids]``.
+      correspondences) is brought onto the mesh with ``data[mesh.vertex_ids]``, or with
+      [`from_file_rows`][bsfjax.Mesh.from_file_rows].
     - `name`: where the mesh came from (a path), for error messages.
+    - `file_rows`: a [`FileRows`][bsfjax.FileRows] record of what the reader dropped (the file's
+      row and triangle counts, the dropped rows), or ``None`` when nothing was dropped.
+
+    **File rows.** The rows of a user's file are the numbering a user sees: the command line
+    reads and writes every per-vertex (per-triangle) file in the file's row order, through
+    [`to_file_rows`][bsfjax.Mesh.to_file_rows] (mesh → file, ``−1`` / NaN on the rows without a
+    vertex), [`from_file_rows`][bsfjax.Mesh.from_file_rows] (file → mesh) and
+    [`file_row_index`][bsfjax.Mesh.file_row_index] (row numbers, e.g. landmarks → vertex
+    indices).  The Python API on meshes and spectra numbers the mesh's own vertices.
 
     The constructor validates its input and raises [`MeshError`][bsfjax.MeshError] on NaN/inf, complex or
     overflowing (``|x| > MAX_COORDINATE``) coordinates, ragged or wrongly shaped arrays,
@@ -55,6 +87,7 @@ class Mesh:
     faces: np.ndarray
     vertex_ids: np.ndarray | None = None
     name: str | None = None
+    file_rows: FileRows | None = None
 
     def __post_init__(self):
         where = f"{self.name}: " if self.name else ""
@@ -130,6 +163,121 @@ class Mesh:
     def area(self) -> float:
         """Total surface area."""
         return float(self.face_areas().sum())
+
+    @property
+    def n_file_rows(self) -> int:
+        """Vertex rows of the file the mesh was read from (``n_vertices`` when none dropped)."""
+        if self.file_rows is not None:
+            return int(self.file_rows.n_rows)
+        return self.n_vertices if self.vertex_ids is None else int(self.vertex_ids.max()) + 1
+
+    @property
+    def n_file_faces(self) -> int:
+        """Triangles of the file the mesh was read from (``n_faces`` when none dropped)."""
+        return self.n_faces if self.file_rows is None else int(self.file_rows.n_faces)
+
+    @property
+    def dropped_rows(self) -> int:
+        """Vertex rows of the file that carry no vertex of the mesh (unreferenced vertices)."""
+        return self.n_file_rows - self.n_vertices
+
+    @property
+    def dropped_faces(self) -> int:
+        """Triangles of the file that the reader dropped (zero area)."""
+        return self.n_file_faces - self.n_faces
+
+    def _ids(self, faces: bool) -> np.ndarray | None:
+        if faces:
+            return None if self.file_rows is None else self.file_rows.face_ids
+        if self.vertex_ids is None and self.n_file_rows != self.n_vertices:
+            return np.arange(self.n_vertices)
+        return self.vertex_ids
+
+    def to_file_rows(self, values, fill=None, *, faces: bool = False) -> np.ndarray:
+        """Per-vertex ``values`` (first axis ``n_vertices``) in the rows of the mesh's file.
+
+        **Arguments:**
+
+        - `values`: ``(n, ...)`` array, one entry per vertex (per triangle with ``faces``).
+        - `fill`: the value of the rows without a vertex (default ``-1`` for integers, NaN
+          otherwise; integers filled with NaN become floats).
+        - `faces`: ``values`` are per triangle: the result has ``n_file_faces`` rows.
+
+        **Returns:**
+
+        ``(n_file_rows, ...)`` (``(n_file_faces, ...)``): row ``r`` holds the value of the vertex
+        read from row ``r``.  The inverse of [`from_file_rows`][bsfjax.Mesh.from_file_rows].
+        """
+        v = np.asarray(values)
+        n, n_file = (self.n_faces, self.n_file_faces) if faces else (self.n_vertices,
+                                                                      self.n_file_rows)
+        if v.shape[:1] != (n,):
+            raise MeshError(f"values must have one row per mesh {'triangle' if faces else 'vertex'} "
+                            f"({n}), got shape {v.shape}")
+        ids = self._ids(faces)
+        if ids is None or n_file == n:
+            return v.copy()
+        integer = np.issubdtype(v.dtype, np.integer) or v.dtype == np.bool_
+        if fill is None:
+            fill = -1 if integer else np.nan
+        dtype = np.float64 if integer and not float(fill).is_integer() else v.dtype
+        out = np.full((n_file,) + v.shape[1:], fill, dtype=dtype)
+        out[ids] = v
+        return out
+
+    def from_file_rows(self, values, *, faces: bool = False) -> np.ndarray:
+        """``values`` given per row of the mesh's file (first axis ``n_file_rows``; with
+        ``faces``, ``n_file_faces``) on the mesh's vertices (triangles): the rows without a
+        vertex are left out.  The inverse of [`to_file_rows`][bsfjax.Mesh.to_file_rows]."""
+        v = np.asarray(values)
+        n_file = self.n_file_faces if faces else self.n_file_rows
+        if v.shape[:1] != (n_file,):
+            raise MeshError(f"values must have one row per file {'triangle' if faces else 'row'} "
+                            f"({n_file}), got shape {v.shape}")
+        ids = self._ids(faces)
+        return v.copy() if ids is None else v[ids]
+
+    def file_row_index(self, rows, what: str = "rows") -> np.ndarray:
+        """The mesh vertices of file rows ``rows`` (e.g. landmarks given as file rows).
+
+        Raises [`MeshError`][bsfjax.MeshError] naming the first row out of range or without a
+        vertex (a row the reader dropped); ``what`` names the input in the message.
+        """
+        r = np.asarray(rows, dtype=np.int64).reshape(-1)
+        n_file = self.n_file_rows
+        bad = (r < 0) | (r >= n_file)
+        if bad.any():
+            raise MeshError(f"{what}: row {int(r[bad][0])} is out of range [0, {n_file})")
+        ids = self._ids(False)
+        if ids is None:
+            return r
+        inv = np.full(n_file, -1, np.int64)
+        inv[ids] = np.arange(self.n_vertices)
+        out = inv[r]
+        if (out < 0).any():
+            where = f" of {self.name}" if self.name else ""
+            raise MeshError(f"{what}: row {int(r[out < 0][0])}{where} is an unreferenced vertex "
+                            "(no triangle uses it): it has no place on the surface")
+        return out
+
+    def file_mesh(self) -> "Mesh":
+        """The mesh as its file has it: every vertex row and every triangle in file order,
+        dropped ones included (for writing per-row data back next to the file's geometry)."""
+        if self.file_rows is None and self.vertex_ids is None:
+            return self
+        fr = self.file_rows
+        ids = self._ids(False)
+        v = np.zeros((self.n_file_rows, 3))
+        v[ids] = self.vertices
+        f_kept = ids[self.faces]
+        if fr is None:
+            return Mesh(v, f_kept, name=self.name)
+        v[np.setdiff1d(np.arange(fr.n_rows), ids)] = fr.dropped_vertices
+        f = np.zeros((fr.n_faces, 3), np.int64)
+        fids = np.arange(self.n_faces) if fr.face_ids is None else fr.face_ids
+        f[fids] = f_kept
+        f[np.setdiff1d(np.arange(fr.n_faces), fids)] = fr.dropped_faces
+        return Mesh(v, f, name=self.name)
 
     def __repr__(self) -> str:
         name = f", name={self.name!r}" if self.name else ""

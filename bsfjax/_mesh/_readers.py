@@ -251,7 +251,8 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
 
     OFF goes through bsfjax's own strict ASCII reader; other formats through meshio.
     Polygons are fan-triangulated; zero-area faces and unreferenced vertices are removed with a
-    warning that says how many (``Mesh.vertex_ids`` maps kept vertices to file rows).  Missing or
+    warning that says how many ([`Mesh.to_file_rows`][bsfjax.Mesh.to_file_rows] maps results back
+    to the file's rows).  Missing or
     unreadable files, NaN/inf coordinates, out-of-range face indices and meshes without faces
     raise [`MeshError`][bsfjax.MeshError] naming the file.
     """

@@ -38,9 +38,8 @@ BLAS calls run on one thread (`bsfjax._util._threads`), as does the eigensolve o
 
 from __future__ import annotations
 
-import dataclasses
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from typing import NamedTuple
 
 import jax
@@ -53,8 +52,9 @@ from .._util import BSFError
 from .._maps import face_geometry
 from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
-from .._maps import MapEstimator, check_landmark_pairs, check_starts
+from .._maps import MapEstimator, check_starts
 from ._face_labels import decide_face_labels, face_label_shares
+from ._collection_rows import collection_estimator, file_row_results, landmark_lookup, source_values
 from .._metrics import labels_to_indicators
 from .._mesh import Mesh, load_mesh
 from .._transfer import BSF, GeodesicBalls, SaturatedHeat, as_method, method_name
@@ -96,6 +96,9 @@ class TargetTransfer(NamedTuple):
     #: without landmarks, from several starts: ``MapEstimate.turn_doubtful`` of its map (the
     #: map may be turned front to back); ``None`` otherwise
     turn_doubtful: bool | None = None
+    #: the target [`Mesh`][bsfjax.Mesh] as read: ``mesh.to_file_rows(labels)`` numbers a result
+    #: by the rows of its file (what ``file_rows=True`` returns)
+    mesh: Mesh | None = None
 
 
 # --------------------------------------------------------------------------- host side
@@ -130,7 +133,7 @@ def _geometry_arrays(mesh: Mesh, m_b: int) -> dict:
             "third_area": _pad_rows(g.third_area, m_b)}
 
 
-def _merged_sizes(targets: list, lm_of, n_source: int, keep: dict[int, Mesh] | None = None,
+def _merged_sizes(targets: list, lm_of, keep: dict[int, Mesh] | None = None,
                   mine: Iterable[int] = ()) -> dict[int, tuple[int, int]]:
     """The padded (vertex, face) counts of each target of a small collection after
     `merge_buckets` (within each landmark count): its targets are read once ahead for
@@ -149,7 +152,7 @@ def _merged_sizes(targets: list, lm_of, n_source: int, keep: dict[int, Mesh] | N
     for i, target in enumerate(targets):
         try:
             mesh = _as_mesh(target)
-            lm = check_landmark_pairs(lm_of(i), n_source, mesh.n_vertices)
+            lm = lm_of(i, mesh)
         except (BSFError, ValueError, OSError):
             continue
         size = mesh.vertices.nbytes + mesh.faces.nbytes
@@ -215,7 +218,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                         seed: int = 0, zoomout_samples: int | None = _DEFAULT.zoomout_samples,
                         spectrum_cache: str | None = None,
                         errors: str = "raise", batch: int = 1, starts=None,
-                        faces: bool = False,
+                        faces: bool = False, file_rows: bool = False,
                         estimator: MapEstimator | None = None) -> Iterator[tuple[int, TargetTransfer | Exception]]:
     """Transfer one segmentation (or functions) from ``source`` to every mesh of ``targets``.
 
@@ -240,6 +243,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
       have 100 eigenpairs, else ``2k``); ``"std2"`` is not supported here.
     - `landmarks`: ``None``, or a callable ``index → (source indices, target indices) or
       None``, or a sequence with one such entry per target.
+    - `file_rows`: ``values``, ``landmarks`` and the results are numbered by the rows of the
+      source's and targets' files (as ``bsfjax transfer --out-dir`` reads and writes them), not
+      by the vertices their readers kept ([`Mesh.to_file_rows`][bsfjax.Mesh.to_file_rows]): a
+      result's ``labels``, ``values``, ``p2p`` (source file rows) and ``mass`` have one entry
+      per row of the target's file, ``-1`` / NaN / ``-1`` / ``0`` on its rows without a vertex;
+      a landmark on such a row is an error naming the row.
     - `threshold`: as [`bsfjax.transfer_labels`][bsfjax.transfer_labels].
     - `zoomout_samples`: as [`bsfjax.estimate_map`][bsfjax.estimate_map] (ZoomOut on this many
       farthest-point samples per shape; ``None``: every vertex).
@@ -283,7 +292,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     check_int(k, "k", 2)
     source = _as_mesh(source)
     n_m = source.n_vertices
-    vals = np.asarray(values)
+    vals = source_values(source, values, faces, labels, file_rows)
     if faces:
         if not labels:
             raise BSFError("faces=True carries labels of triangles: labels must be True")
@@ -303,7 +312,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                            f"n_source = {n_m}, got {vals.shape}")
     _, _, threshold, refined = _split_label_kwargs(method, threshold, {})
     k_map = 2 * k
-    estimator = _collection_estimator(estimator, k, k_map, n_energies, zoomout_samples, starts)
+    estimator = collection_estimator(estimator, k, k_map, n_energies, zoomout_samples, starts)
     n_energies, zoomout_samples = estimator.n_energies, estimator.zoomout_samples
     k_spec = max(k_map, REFINE_EIGENPAIRS) if getattr(method, "full_spectra", False) else k_map
     if k_spec >= n_m:
@@ -331,7 +340,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         rep["zo_indices"] = sub_m.indices
         rep["zo_cells"] = sub_m.cells
         zo_chunk = default_chunk(sub_m.indices.size)
-    lm_of = _landmark_lookup(landmarks)
+    lm_of = landmark_lookup(landmarks, source, file_rows)
     # one start, the batched stages' own: (k, wks_variance) with the orientation term
     single = (k, estimator.wks_variance)
     one_start = check_starts(estimator.starts, k_map, (single,),
@@ -350,7 +359,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         if mesh.n_vertices <= k_spec:
             raise BSFError(f"{mesh.name or f'target {i}'}: {mesh.n_vertices} vertices, too few "
                            f"for {k_spec} eigenpairs")
-        lm = check_landmark_pairs(lm_of(i), n_m, mesh.n_vertices)
+        lm = lm_of(i, mesh)
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
@@ -421,17 +430,18 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             elif labels:
                 lab, _, share_un, agree, conf, regime = _decide_labels(
                     ids, vals_j, mass, threshold, refined, vals[p2p])
-            yield tg.index, TargetTransfer(
+            res = TargetTransfer(
                 labels=lab, values=vals_j, p2p=p2p,
                 C=map_to_unit_area(o["C"].astype(np.float64), *tg.factors, inverse=True),
                 map_energy=float(o["energy"]), unassigned_share=share_un,
                 agreement=agree, confidence=conf, regime=regime, n_vertices=n, mass=mass,
-                seconds=tg.seconds + share, turn_doubtful=tg.turn_doubtful)
+                seconds=tg.seconds + share, turn_doubtful=tg.turn_doubtful, mesh=tg.mesh)
+            yield tg.index, file_row_results(res, source, faces) if file_rows else res
 
     targets = list(targets)
     share = process_share(range(len(targets)))
     read: dict[int, Mesh] = {}  # targets of this process the scan has read, handed to prepare
-    merged = _merged_sizes(targets, lm_of, n_m, read, share) if pad else {}
+    merged = _merged_sizes(targets, lm_of, read, share) if pad else {}
     # the group in flight is collected after the next target's host work (module doc)
     in_flight = None
     cpu = jax.default_backend() == "cpu"
@@ -469,30 +479,3 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         in_flight = launched
     if in_flight is not None:
         yield from finish(in_flight)
-
-
-def _collection_estimator(estimator, k: int, k_map: int, n_energies, zoomout_samples,
-                          starts) -> MapEstimator:
-    """The collection's [`MapEstimator`][bsfjax.MapEstimator] at ``k`` and ZoomOut to ``k_map``
-    (`transfer_collection`'s ``estimator`` argument)."""
-    if estimator is None:
-        return MapEstimator(k=k, refine_to=k_map, n_energies=n_energies,
-                            zoomout_samples=zoomout_samples, starts=starts)
-    if not isinstance(estimator, MapEstimator):
-        raise BSFError(f"estimator must be a bsfjax.MapEstimator, got "
-                       f"{type(estimator).__name__}")
-    if (n_energies, zoomout_samples, starts) != (_DEFAULT.n_energies,
-                                                 _DEFAULT.zoomout_samples, _DEFAULT.starts):
-        raise BSFError("with an estimator, give n_energies, zoomout_samples and starts as its "
-                       "fields")
-    return dataclasses.replace(estimator, k=k, refine_to=k_map)
-
-
-def _landmark_lookup(landmarks) -> Callable[[int], tuple | None]:
-    if landmarks is None:
-        return lambda i: None
-    if callable(landmarks):
-        return landmarks
-    seq = list(landmarks)
-    return lambda i: seq[i] if i < len(seq) else None
-

@@ -137,7 +137,7 @@ def _read_vts(path: Path, mesh: Mesh) -> np.ndarray:
     if raw.ndim != 1 or raw.size == 0:
         raise BSFError(f"{path}: expected one 1-based vertex index per line, got shape {raw.shape}")
     idx = raw - 1
-    n_file = mesh.n_vertices if mesh.vertex_ids is None else int(mesh.vertex_ids.max()) + 1
+    n_file = mesh.n_file_rows  # (rows the loader dropped included)
     if idx.min() < 0 or idx.max() >= n_file:
         raise BSFError(f"{path}: indices must be in 1..{n_file} (the vertices of the mesh), found "
                        f"{raw.min()}..{raw.max()}")

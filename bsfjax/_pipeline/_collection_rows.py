@@ -1,0 +1,91 @@
+"""The arguments and results of [`bsfjax.transfer_collection`][bsfjax.transfer_collection] around its stages: its estimator, its landmarks, and the rows of the files.
+
+With ``file_rows=True`` the collection reads the source's values and the landmarks as rows of
+the mesh files and numbers every result by the rows of its target's file
+([`Mesh.to_file_rows`][bsfjax.Mesh.to_file_rows]): the readers drop unreferenced vertices and
+zero-area triangles, and a user's files must not shift by them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+
+from .._maps import MapEstimator, check_landmark_pairs
+from .._mesh import Mesh
+from .._util import BSFError
+
+_DEFAULT = MapEstimator()
+
+
+def collection_estimator(estimator, k: int, k_map: int, n_energies, zoomout_samples,
+                         starts) -> MapEstimator:
+    """The collection's [`MapEstimator`][bsfjax.MapEstimator] at ``k`` and ZoomOut to ``k_map``
+    (`transfer_collection`'s ``estimator`` argument)."""
+    if estimator is None:
+        return MapEstimator(k=k, refine_to=k_map, n_energies=n_energies,
+                            zoomout_samples=zoomout_samples, starts=starts)
+    if not isinstance(estimator, MapEstimator):
+        raise BSFError(f"estimator must be a bsfjax.MapEstimator, got "
+                       f"{type(estimator).__name__}")
+    if (n_energies, zoomout_samples, starts) != (_DEFAULT.n_energies,
+                                                 _DEFAULT.zoomout_samples, _DEFAULT.starts):
+        raise BSFError("with an estimator, give n_energies, zoomout_samples and starts as its "
+                       "fields")
+    return dataclasses.replace(estimator, k=k, refine_to=k_map)
+
+
+def landmark_lookup(landmarks, source: Mesh,
+                    file_rows: bool) -> Callable[[int, Mesh], tuple | None]:
+    """``(index, target mesh) →`` the checked landmark pair of target ``index`` (vertex
+    indices of ``source`` and of the target), or ``None``; with ``file_rows`` the given
+    indices are rows of the two files, mapped onto the vertices their readers kept."""
+    if landmarks is None:
+        given = lambda i: None  # noqa: E731
+    elif callable(landmarks):
+        given = landmarks
+    else:
+        seq = list(landmarks)
+        given = lambda i: seq[i] if i < len(seq) else None  # noqa: E731
+
+    def lookup(i: int, mesh: Mesh):
+        if not file_rows:
+            return check_landmark_pairs(given(i), source.n_vertices, mesh.n_vertices)
+        lm = check_landmark_pairs(given(i), source.n_file_rows, mesh.n_file_rows)
+        if lm is None:
+            return None
+        return (source.file_row_index(lm[0], "source landmarks"),
+                mesh.file_row_index(lm[1], f"target landmarks of {mesh.name or f'target {i}'}"))
+
+    return lookup
+
+
+def source_values(source: Mesh, values, faces: bool, labels: bool, file_rows: bool):
+    """The collection's ``values`` on the source's vertices (triangles): with ``file_rows``
+    given per row of its file (labels ``(n,)``, functions ``(m, n)``)."""
+    vals = np.asarray(values)
+    if not file_rows:
+        return vals
+    if vals.ndim == 0 or vals.shape[-1] != (source.n_file_faces if faces else source.n_file_rows):
+        what = "triangle" if faces else "row"
+        raise BSFError(f"values must have one entry per {what} of the source's file "
+                       f"({source.n_file_faces if faces else source.n_file_rows}), got shape "
+                       f"{vals.shape}")
+    return np.moveaxis(source.from_file_rows(np.moveaxis(vals, -1, 0), faces=faces), 0, -1)
+
+
+def file_row_results(res, source: Mesh, faces: bool):
+    """A [`TargetTransfer`][bsfjax.TargetTransfer] numbered by the rows of its target's file:
+    ``-1`` labels and point-map entries, NaN values and zero mass on the rows without a vertex
+    (triangle), the point map's entries as rows of the source's file."""
+    mesh = res.mesh
+    rows_m = source.vertex_ids if source.vertex_ids is not None else np.arange(source.n_vertices)
+    labels = None if res.labels is None else mesh.to_file_rows(res.labels, faces=faces)
+    return res._replace(labels=labels, values=mesh.to_file_rows(res.values.T).T,
+                        p2p=mesh.to_file_rows(rows_m[res.p2p]),
+                        mass=mesh.to_file_rows(res.mass, 0.0))
+
+
+__all__ = ["collection_estimator", "file_row_results", "landmark_lookup", "source_values"]
