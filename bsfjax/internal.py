@@ -36,6 +36,9 @@ from ._pipeline import (
 from ._plot import (
     label_colour,
 )
+from ._util import available_memory, check_path_clashes
+from ._maps import check_fmap_memory
+from ._pipeline import capped_batch
 from ._cli import (
     CLIError, TURN_DOUBT, example_landmarks, format_table, run_demo,
 )
@@ -54,3 +57,4 @@ __all__ = [
     "size_bucket", "sparse_atoms", "sparse_gram", "subdivide", "unique_atoms", "wks_energies",
     "write_text_atomic",
 ]
+__all__ += ["available_memory", "capped_batch", "check_fmap_memory", "check_path_clashes"]

@@ -136,6 +136,7 @@ def test_two_processes_write_what_one_process_writes(files, one_process):
     (["--map", "p2p", "m.txt"], "with --out-dir the map is estimated"),
     (["--coordinator", "127.0.0.1:1"], "go together"),
     (["--truth-dir", "nowhere"], "--truth-dir nowhere: no such folder"),
+    (["--timeout", "0"], "--timeout must be an integer >= 1"),
 ])
 def test_bad_options_are_one_line(files, tmp_path, capsys, extra, match):
     argv = _argv(files, tmp_path / "o", files / "tg", extra=extra)
@@ -208,10 +209,11 @@ def test_cluster_detection_and_flags(monkeypatch):
     monkeypatch.delenv("SLURM_NTASKS")
     monkeypatch.setenv("OMPI_COMM_WORLD_SIZE", "2")
     _initialize_distributed(args, CLIError)
-    assert calls == [{}, {}]
-    args = argparse.Namespace(coordinator="h:1", num_processes=3, process_id=2)
+    assert calls == [{"initialization_timeout": 120}] * 2  # --timeout's default
+    args = argparse.Namespace(coordinator="h:1", num_processes=3, process_id=2, timeout=7)
     _initialize_distributed(args, CLIError)
-    assert calls[-1] == dict(coordinator_address="h:1", num_processes=3, process_id=2)
+    assert calls[-1] == dict(coordinator_address="h:1", num_processes=3, process_id=2,
+                             initialization_timeout=7)
     with pytest.raises(CLIError, match="--process-id must be in"):
         _initialize_distributed(argparse.Namespace(coordinator="h:1", num_processes=2,
                                                    process_id=2), CLIError)

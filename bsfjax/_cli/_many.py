@@ -5,16 +5,23 @@ written as soon as it is computed, atomically: ``DIR/<stem>.txt`` (``DIR/<stem>.
 the source's part names for ``.json`` labels, as [`bsfjax.save_labels`][bsfjax.save_labels];
 ``DIR/<stem>.seg`` for labels of triangles, as [`bsfjax.transfer_face_labels`][bsfjax.transfer_face_labels]; and
 ``MESH_DIR/<stem>.ply`` with ``--mesh-out-dir``); ``DIR/summary.json`` lists every target.
-``--truth-dir`` holds ``<stem>.txt``, ``.npy``, ``.json`` or ``.seg``.  A rerun skips the
-targets whose outputs are complete (unless ``--overwrite``), so an interrupted run resumes; a
-target that cannot be read or solved is reported and skipped, and the exit status is 1.  With
-``--coordinator/--num-processes/--process-id`` (or inside a SLURM or Open MPI job) the
-processes of ``jax.distributed`` share the targets; each writes its own.
+``--truth-dir`` holds ``<stem>.txt``, ``.npy``, ``.json`` or ``.seg``.  Every output path is
+compared with every input path and with the others before any work (`check_run_paths`).
+``DIR/manifest/<stem>.json`` records what each target's outputs were computed from (the
+options, and sha256 checksums of the source, the labels, the target, its truth and
+landmarks) and its summary row: a rerun skips the targets whose outputs are complete *and*
+whose manifest matches (unless ``--overwrite``), so an interrupted run resumes, and a rerun
+with other inputs or options recomputes the targets it changes.  A target that cannot be
+read, solved, scored against its truth or written is reported in ``summary.json`` and
+skipped, and the exit status is 1.  With ``--coordinator/--num-processes/--process-id`` (or
+inside a SLURM or Open MPI job) the processes of ``jax.distributed`` share the targets; each
+writes its own.
 """
 
 from __future__ import annotations
 
 import glob
+import hashlib
 import json
 import os
 import sys
@@ -24,6 +31,12 @@ MESH_SUFFIXES = (".off", ".ply", ".obj", ".stl", ".vtk", ".vtu", ".msh", ".mesh"
 #: Environment variables of the launchers whose cluster ``jax.distributed.initialize()``
 #: detects by itself: (variable holding the process count, launcher).
 _CLUSTER_SIZE_VARS = (("SLURM_NTASKS", "SLURM"), ("OMPI_COMM_WORLD_SIZE", "Open MPI"))
+#: The truth files ``--truth-dir`` may hold per target, in the order they are looked for.
+TRUTH_SUFFIXES = (".txt", ".npy", ".json", ".seg")
+#: The folder of ``--out-dir`` holding each target's manifest, ``<stem>.json``.
+MANIFEST_DIR = "manifest"
+#: Seconds ``jax.distributed`` may take to start (``--timeout``): JAX's own default is 300.
+DEFAULT_TIMEOUT = 120
 
 
 def expand_targets(patterns: list[str], error) -> list[Path]:
@@ -86,17 +99,38 @@ def _read_landmarks_file(path: str | None, targets: list[Path], error) -> dict[i
     return out
 
 
+def check_coordinator(text: str, error) -> tuple[str, int]:
+    """``--coordinator`` as ``HOST:PORT`` (an IPv6 host in brackets), checked before anything:
+    ``garbage`` or ``host:abc`` reached gRPC as they were (a traceback, or a segfault)."""
+    host, sep, port = text.rpartition(":")
+    bare = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if (not sep or not bare or not port.isdigit() or not 1 <= int(port) <= 65535
+            or any(c.isspace() or c in "/[]" for c in bare) or (":" in bare and bare == host)):
+        raise error(f"--coordinator must be HOST:PORT with a port in [1, 65535] (an IPv6 host "
+                    f"in brackets: [::1]:1234), got {text!r}")
+    return bare, int(port)
+
+
 def _initialize_distributed(args, error) -> None:
-    """``jax.distributed`` from the flags, or from the cluster's environment without them."""
+    """``jax.distributed`` from the flags, or from the cluster's environment without them.
+    Start-up waits at most ``--timeout`` seconds; a coordinator that cannot be reached or a
+    peer that does not come is one error line (exit status 2), not XLA's abort."""
     flags = (args.coordinator, args.num_processes, args.process_id)
+    timeout = getattr(args, "timeout", None)
+    timeout = DEFAULT_TIMEOUT if timeout is None else timeout
+    if not isinstance(timeout, int) or timeout < 1:
+        raise error(f"--timeout must be an integer >= 1 (seconds), got {timeout}")
     if any(f is not None for f in flags):
         if any(f is None for f in flags):
             raise error("--coordinator, --num-processes and --process-id go together")
+        check_coordinator(args.coordinator, error)
         if args.num_processes < 1 or not 0 <= args.process_id < args.num_processes:
             raise error(f"--process-id must be in [0, {args.num_processes}) and --num-processes "
                         f">= 1, got {args.process_id} and {args.num_processes}")
         kwargs = dict(coordinator_address=args.coordinator, num_processes=args.num_processes,
                       process_id=args.process_id)
+        where = (f"process {args.process_id} of {args.num_processes}, coordinator "
+                 f"{args.coordinator}")
     else:
         launcher = next((name for var, name in _CLUSTER_SIZE_VARS
                          if os.environ.get(var, "1").isdigit() and int(os.environ.get(var, "1")) > 1),
@@ -104,72 +138,227 @@ def _initialize_distributed(args, error) -> None:
         if launcher is None:
             return
         kwargs = {}  # jax.distributed finds the coordinator and ranks in the environment
+        where = f"{launcher} job"
         print(f"bsfjax: {launcher} job detected: initializing jax.distributed", file=sys.stderr)
     import jax
 
     jax.config.update("jax_cpu_collectives_implementation", "gloo")  # CPU processes too
-    jax.distributed.initialize(**kwargs)
+    try:
+        with _no_abort_on_start_up():
+            jax.distributed.initialize(initialization_timeout=timeout, **kwargs)
+    except (RuntimeError, ValueError) as exc:
+        why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        why = "" if "bad_cast" in why else f" ({why})"
+        raise error(f"jax.distributed did not start within --timeout {timeout} s ({where}): "
+                    f"the coordinator cannot be reached or a process did not join{why}") from None
 
 
-def _complete(stem: str, out_dir: Path, mesh_dir: Path | None, suffix: str) -> bool:
-    return (out_dir / f"{stem}{suffix}").is_file() and (
-        mesh_dir is None or (mesh_dir / f"{stem}.ply").is_file())
+class _no_abort_on_start_up:
+    """While ``jax.distributed.initialize`` connects, give its client an error callback:
+    without one XLA ends the process (``LOG(QFATAL)``, a C++ stack) when the start-up times
+    out; with one the failure comes back as an exception.  (jaxlib cannot hand the error's
+    status to Python: the call raises a ``RuntimeError`` of its own, which is all we need.)"""
+
+    def __enter__(self):
+        try:
+            from jax._src.lib import _jax
+        except ImportError:  # pragma: no cover - another jaxlib layout: XLA's default
+            self.mod = None
+            return self
+        self.mod, self.real = _jax, getattr(_jax, "get_distributed_runtime_client", None)
+        if self.real is not None:
+            real = self.real
+
+            def client(*a, **kw):
+                try:
+                    return real(*a, **dict(kw, missed_heartbeat_callback=lambda *_: None))
+                except TypeError:  # a jaxlib without the argument: its own behaviour
+                    return real(*a, **kw)
+
+            _jax.get_distributed_runtime_client = client
+        return self
+
+    def __exit__(self, *exc):
+        if self.mod is not None and self.real is not None:
+            self.mod.get_distributed_runtime_client = self.real
+        return False
 
 
-def _remove_stale_temporaries(targets, out_dir: Path, mesh_dir: Path | None,
-                              suffix: str) -> None:
+def check_backend(error) -> None:
+    """JAX's backend, started now so that a platform that cannot start (``JAX_PLATFORMS=cuda``
+    on a machine without CUDA) is one error line, not a traceback."""
+    import jax
+
+    try:
+        jax.devices()
+    except (RuntimeError, AssertionError) as exc:  # (JAX's assert: no platform started)
+        first = (str(exc).strip().splitlines()[0] if str(exc).strip() else
+                 "none of its platforms is available on this machine")
+        raise error(f"JAX cannot start its backend (JAX_PLATFORMS="
+                    f"{os.environ.get('JAX_PLATFORMS', '')!r}): {first}") from None
+
+
+def _sha256(path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _truth_path(truth_dir, stem: str) -> Path | None:
+    """The truth file of target ``stem`` (the first of ``TRUTH_SUFFIXES`` present)."""
+    if truth_dir is None:
+        return None
+    return next((p for p in (Path(truth_dir) / f"{stem}{s}" for s in TRUTH_SUFFIXES)
+                 if p.is_file()), None)
+
+
+class _Run:
+    """The output paths of one ``--out-dir`` run and its manifest: what each target's outputs
+    were computed from (`key`), checked by `complete` on a rerun."""
+
+    def __init__(self, args, targets: list[Path], landmarks: dict, suffix: str):
+        from .._util import VERSION
+
+        self.args, self.targets, self.landmarks, self.suffix = args, targets, landmarks, suffix
+        self.out_dir = Path(args.out_dir)
+        self.mesh_dir = Path(args.mesh_out_dir) if args.mesh_out_dir else None
+        values = args.labels if args.labels is not None else args.function
+        self.common = {"bsfjax": VERSION, "method": args.method, "k": args.k,
+                       "threshold": args.threshold, "one_start": bool(args.one_start),
+                       "kind": "labels" if args.labels is not None else "function",
+                       "output": suffix, "source": _sha256(args.source),
+                       "values": _sha256(values)}
+
+    def outputs(self, p: Path) -> list[Path]:
+        out = [self.out_dir / f"{p.stem}{self.suffix}"]
+        return out + ([] if self.mesh_dir is None else [self.mesh_dir / f"{p.stem}.ply"])
+
+    def manifest(self, p: Path) -> Path:
+        return self.out_dir / MANIFEST_DIR / f"{p.stem}.json"
+
+    def key(self, i: int) -> dict:
+        p = self.targets[i]
+        truth = _truth_path(self.args.truth_dir, p.stem)
+        lm = self.landmarks.get(i)
+        return dict(self.common, target=_sha256(p), landmarks=None if lm is None else list(lm),
+                    truth=None if truth is None else _sha256(truth))
+
+    def complete(self, i: int) -> dict | None:
+        """The summary row of target ``i`` when its outputs are complete and its manifest
+        says they were computed from this run's inputs and options; else ``None``."""
+        p = self.targets[i]
+        outs = self.outputs(p)
+        if not all(q.is_file() for q in outs) or not self.manifest(p).is_file():
+            return None
+        try:
+            m = json.loads(self.manifest(p).read_text())
+            same = (m["key"] == json.loads(json.dumps(self.key(i)))
+                    and {str(q.resolve()) for q in outs} <= set(m["outputs"]))
+            return dict(m["record"], target=str(p)) if same else None
+        except (OSError, ValueError, KeyError, TypeError):
+            return None  # an unreadable manifest: computed again
+
+    def write_manifest(self, i: int, record: dict) -> None:
+        from .._util import write_text_atomic
+
+        p = self.targets[i]
+        body = {"key": self.key(i), "outputs": [str(q.resolve()) for q in self.outputs(p)],
+                "record": record}
+        write_text_atomic(self.manifest(p), json.dumps(body, indent=1) + "\n", immediate=True)
+
+
+def check_run_paths(args, targets: list[Path], suffix: str, error) -> None:
+    """Every output path of the run (each target's labels or values, coloured mesh and
+    manifest, and ``summary.json``) against every input path (the source, the targets, the
+    labels or function, the landmarks file, every possible truth file) and against each
+    other, resolved, before any work: one line naming both (`bsfjax._util.check_path_clashes`).
+    """
+    from .._util import check_path_clashes
+
+    out_dir = Path(args.out_dir)
+    mesh_dir = Path(args.mesh_out_dir) if args.mesh_out_dir else None
+    inputs = [("source", args.source), ("--labels", args.labels), ("--function", args.function),
+              ("--landmarks-file", args.landmarks_file)]
+    inputs += [("target", p) for p in targets]
+    if args.truth_dir is not None:
+        inputs += [(f"--truth-dir truth of target {p.name}", Path(args.truth_dir) / f"{p.stem}{s}")
+                   for p in targets for s in TRUTH_SUFFIXES]
+    outputs = [("--out-dir summary", out_dir / "summary.json")]
+    for p in targets:
+        outputs.append((f"--out-dir output of target {p.name}", out_dir / f"{p.stem}{suffix}"))
+        outputs.append((f"manifest of target {p.name}", out_dir / MANIFEST_DIR / f"{p.stem}.json"))
+        if mesh_dir is not None:
+            outputs.append((f"--mesh-out-dir mesh of target {p.name}", mesh_dir / f"{p.stem}.ply"))
+    try:
+        check_path_clashes(outputs, inputs)
+    except ValueError as exc:
+        raise error(str(exc)) from None
+
+
+def _remove_stale_temporaries(run: _Run) -> None:
     """Remove what a killed run (SIGKILL: no clean-up) left of its atomic writes: the
     ``.<name>.<8 random characters>.tmp<suffix>`` files of this run's outputs (the names of
     `bsfjax._util._files.atomic_path`), never the outputs themselves."""
-    names = [(out_dir, "summary.json")] + [(out_dir, f"{p.stem}{suffix}") for p in targets]
-    if mesh_dir is not None:
-        names += [(mesh_dir, f"{p.stem}.ply") for p in targets]
-    for folder, name in names:
-        suffix = Path(name).suffix
-        for tmp in folder.glob(f".{name}.????????.tmp{suffix}"):
-            tmp.unlink(missing_ok=True)
+    paths = [run.out_dir / "summary.json"]
+    for p in run.targets:
+        paths += run.outputs(p) + [run.manifest(p)]
+    names: dict[Path, set[str]] = {}
+    for path in paths:
+        names.setdefault(path.parent, set()).add(path.name)
+    for folder, ours in names.items():  # one listing per folder, not one per output
+        if not folder.is_dir():
+            continue
+        for tmp in folder.iterdir():
+            n = tmp.name
+            cut = n.rfind(".tmp")
+            base = n[1:cut] if n.startswith(".") and cut > 10 else ""
+            name = base[:-9]
+            if (len(base) > 9 and base[-9] == "." and name in ours
+                    and n[cut:] == ".tmp" + Path(name).suffix):
+                tmp.unlink(missing_ok=True)
 
 
 def cmd_transfer_many(args, error) -> int:
     """The multi-target ``bsfjax transfer`` (see the module docstring)."""
-    _initialize_distributed(args, error)
+    _initialize_distributed(args, error)  # (--coordinator checked first of all)
+    check_backend(error)
     import jax
     import numpy as np
     from tqdm import tqdm
 
-    from .._pipeline import process_share, transfer_collection
-    from .._util import atomic_path
-    from .._mesh import save_labels
+    from .._maps import check_fmap_memory
     from .._mesh import load_mesh
-    from .._mesh import save_mesh
+    from .._pipeline import process_share, transfer_collection
+    from ._io import map_estimator, read_values
 
     targets = expand_targets(args.target, error)
     out_dir = Path(args.out_dir)
-    mesh_dir = Path(args.mesh_out_dir) if args.mesh_out_dir else None
     landmarks = _read_landmarks_file(args.landmarks_file, targets, error)
     source = load_mesh(args.source)
-    from ._io import read_values
-    from ._io import TURN_DOUBT, map_estimator
-
     values, part_names, per_face = read_values(args, source, on_mesh=False)  # file rows
     # .json labels come back as .json, triangles' labels as .seg
     suffix = ".seg" if per_face else ".txt" if part_names is None else ".json"
+    check_run_paths(args, targets, suffix, error)
+    check_fmap_memory(args.k)  # (transfer_collection: again for its batch)
+    run = _Run(args, targets, landmarks, suffix)
     out_dir.mkdir(parents=True, exist_ok=True)
     multi = jax.process_count() > 1
     if jax.process_index() == 0:  # before the first barrier: no process is writing yet
-        _remove_stale_temporaries(targets, out_dir, mesh_dir, suffix)
+        _remove_stale_temporaries(run)
     if multi:  # every process lists the finished targets before any of them writes
         from jax.experimental import multihost_utils
 
         multihost_utils.sync_global_devices("bsfjax transfer: start")
-    todo = [i for i, p in enumerate(targets)
-            if args.overwrite or not _complete(p.stem, out_dir, mesh_dir, suffix)]
+    done = {} if args.overwrite else {i: r for i in range(len(targets))
+                                      if (r := run.complete(i)) is not None}
+    todo = [i for i in range(len(targets)) if i not in done]
     if multi:
         multihost_utils.sync_global_devices("bsfjax transfer: listed")
-    print(f"{len(targets)} targets: {len(targets) - len(todo)} complete (skipped), {len(todo)} "
+    print(f"{len(targets)} targets: {len(done)} complete (skipped), {len(todo)} "
           f"to run" + (f" on {jax.process_count()} processes" if multi else ""), file=sys.stderr)
     records: dict[str, dict] = {}
-    failed = dropped = 0
     labels = args.labels is not None
     results = transfer_collection(
         source, values, [targets[i] for i in todo], labels=labels, faces=per_face,
@@ -181,52 +370,23 @@ def cmd_transfer_many(args, error) -> int:
     bar = tqdm(total=mine, desc="targets", unit="target", disable=args.no_progress,
                file=sys.stderr)
     for j, res in results:
-        path = targets[todo[j]]
+        i, path = todo[j], targets[todo[j]]
         bar.update(1)
-        if isinstance(res, Exception):
-            failed += 1
-            msg = " ".join(str(res).split())
+        try:
+            if isinstance(res, Exception):
+                raise res
+            records[path.stem] = _write_target(args, run, i, res, part_names, per_face, error)
+        except (ValueError, OSError) as exc:  # this target only: the others go on
+            msg = " ".join(str(exc).split()) or type(exc).__name__
             tqdm.write(f"bsfjax transfer: {path}: error: {msg}", file=sys.stderr)
             records[path.stem] = {"target": str(path), "status": "error", "error": msg}
-            continue
-        # every output has the rows of the target's file (-1 / NaN on the dropped ones)
-        target = res.mesh
-        rec = {"target": str(path), "status": "ok", "vertices": res.n_vertices,
-               "dropped_rows": target.dropped_rows, "map_energy": res.map_energy,
-               "seconds": round(res.seconds, 4)}
-        if per_face:
-            rec["dropped_triangles"] = target.dropped_faces
-        dropped += bool(target.dropped_faces if per_face else target.dropped_rows)
-        if res.turn_doubtful is not None:
-            rec["turn_doubtful"] = res.turn_doubtful
-            if res.turn_doubtful:
-                tqdm.write(f"bsfjax transfer: {path}: warning: {TURN_DOUBT}", file=sys.stderr)
-        if labels:
-            rec.update(unassigned_share=res.unassigned_share, regime=res.regime,
-                       confidence=res.confidence, agreement=res.agreement)
-            truth = _truth(args.truth_dir, path.stem, len(res.labels), part_names, error,
-                           per_face)
-            if truth is not None:
-                mass = target.file_mesh().face_areas() if per_face else res.mass
-                rec["accuracy"] = float(np.sum(mass * (res.labels == truth)) / np.sum(mass))
-            result = res.labels.astype(np.int64)
-        else:
-            result = res.values.T if res.values.shape[0] > 1 else res.values[0]
-        if mesh_dir is not None:
-            from ._io import coloured_data
-
-            coloured = coloured_data(result, labels)
-            save_mesh(mesh_dir / f"{path.stem}.ply", target.file_mesh(), immediate=True,
-                      **({"cell_data": coloured} if per_face else {"point_data": coloured}))
-        if labels:
-            save_labels(out_dir / f"{path.stem}{suffix}", result, part_names, immediate=True)
-        else:
-            with atomic_path(out_dir / f"{path.stem}{suffix}", immediate=True) as tmp:
-                np.savetxt(tmp, result, fmt="%.8g")
-        records[path.stem] = rec
     bar.close()
-    _write_summary(out_dir, targets, records, multi)
-    n_ok = sum(r["status"] == "ok" for r in records.values())
+    _write_summary(out_dir, targets, records, {targets[i].stem: r for i, r in done.items()},
+                   multi)
+    failed = sum(r["status"] == "error" for r in records.values())
+    n_ok = len(records) - failed
+    dropped = sum(bool(r.get("dropped_triangles" if per_face else "dropped_rows"))
+                  for r in records.values())
     print(f"wrote {n_ok} targets to {out_dir}" + (f"; {failed} failed" if failed else "")
           + (f" ({dropped} with file rows that carry no surface: -1 / NaN there, counted in "
              "summary.json)" if dropped else ""), file=sys.stderr)
@@ -237,24 +397,73 @@ def cmd_transfer_many(args, error) -> int:
     return 1 if failed else 0
 
 
+def _write_target(args, run: _Run, i: int, res, part_names, per_face: bool, error) -> dict:
+    """Score target ``i`` against its truth and write its outputs, then its manifest;
+    returns its summary row.  Raises for this target alone (a truth of the wrong length, an
+    output that cannot be written, a part name `save_labels` reserves)."""
+    import numpy as np
+    from tqdm import tqdm
+
+    from .._mesh import save_labels, save_mesh
+    from .._util import atomic_path
+    from ._io import TURN_DOUBT, coloured_data
+
+    path, labels = run.targets[i], args.labels is not None
+    # every output has the rows of the target's file (-1 / NaN on the dropped ones)
+    target = res.mesh
+    rec = {"target": str(path), "status": "ok", "vertices": res.n_vertices,
+           "dropped_rows": target.dropped_rows, "map_energy": res.map_energy,
+           "seconds": round(res.seconds, 4)}
+    if per_face:
+        rec["dropped_triangles"] = target.dropped_faces
+    if res.turn_doubtful is not None:
+        rec["turn_doubtful"] = res.turn_doubtful
+        if res.turn_doubtful:
+            tqdm.write(f"bsfjax transfer: {path}: warning: {TURN_DOUBT}", file=sys.stderr)
+    if labels:
+        rec.update(unassigned_share=res.unassigned_share, regime=res.regime,
+                   confidence=res.confidence, agreement=res.agreement)
+        truth = _truth(args.truth_dir, path.stem, len(res.labels), part_names, error,
+                       per_face)
+        if truth is not None:
+            mass = target.file_mesh().face_areas() if per_face else res.mass
+            rec["accuracy"] = float(np.sum(mass * (res.labels == truth)) / np.sum(mass))
+        result = res.labels.astype(np.int64)
+    else:
+        result = res.values.T if res.values.shape[0] > 1 else res.values[0]
+    run.manifest(path).unlink(missing_ok=True)  # the old outputs are being replaced
+    out, *mesh_out = run.outputs(path)
+    if mesh_out:
+        coloured = coloured_data(result, labels)
+        save_mesh(mesh_out[0], target.file_mesh(), immediate=True,
+                  **({"cell_data": coloured} if per_face else {"point_data": coloured}))
+    if labels:
+        save_labels(out, result, part_names, immediate=True)
+    else:
+        with atomic_path(out, immediate=True) as tmp:
+            np.savetxt(tmp, result, fmt="%.8g")
+    run.write_manifest(i, rec)
+    return rec
+
+
 def _truth(truth_dir, stem: str, n: int, names, error, per_face: bool = False):
     if truth_dir is None:
         return None
     from ._io import read_truth
 
-    for suffix in (".txt", ".npy", ".json", ".seg"):
-        p = Path(truth_dir) / f"{stem}{suffix}"
-        if p.is_file():
-            arr = read_truth(str(p), names)
-            if arr.shape != (n,):
-                raise error(f"truth file {p}: expected {n} labels (one per target "
-                            f"{'triangle' if per_face else 'vertex'}), got shape {arr.shape}")
-            return arr
-    return None
+    p = _truth_path(truth_dir, stem)
+    if p is None:
+        return None
+    arr = read_truth(str(p), names)
+    if arr.shape != (n,):
+        raise error(f"truth file {p}: expected {n} labels (one per target "
+                    f"{'triangle' if per_face else 'vertex'}), got shape {arr.shape}")
+    return arr
 
 
-def _write_summary(out_dir: Path, targets, records, multi: bool) -> None:
-    """``summary.json``: this run's records, and the earlier run's for the skipped targets.
+def _write_summary(out_dir: Path, targets, records, done, multi: bool) -> None:
+    """``summary.json``: this run's records, and for the complete targets it skipped the rows
+    their manifests keep (so a resumed run keeps the figures of what a killed run finished).
     Under ``jax.distributed`` each process writes its part; process 0 merges them."""
     from .._util import write_text_atomic
 
@@ -270,24 +479,12 @@ def _write_summary(out_dir: Path, targets, records, multi: bool) -> None:
         for p in sorted(out_dir.glob(".summary.part*.json")):
             merged.update(json.loads(p.read_text()))
         records = merged
-    old = {}
-    summary = out_dir / "summary.json"
-    if summary.is_file():
-        try:
-            old = {r["target"]: r for r in json.loads(summary.read_text()).get("targets", [])}
-        except (OSError, ValueError, AttributeError, KeyError, TypeError):
-            old = {}  # an unreadable summary is rewritten from this run
-    rows = []
-    for p in targets:
-        if p.stem in records:
-            rows.append(records[p.stem])
-        elif str(p) in old:
-            rows.append(old[str(p)])
-        else:
-            rows.append({"target": str(p), "status": "skipped"})
+    rows = [records.get(p.stem) or done.get(p.stem) or {"target": str(p), "status": "skipped"}
+            for p in targets]
     # at once, not at the end of the command's output transaction: the processes of a
     # distributed run read each other's parts, and a killed run keeps what it finished
-    write_text_atomic(summary, json.dumps({"targets": rows}, indent=1) + "\n", immediate=True)
+    write_text_atomic(out_dir / "summary.json", json.dumps({"targets": rows}, indent=1) + "\n",
+                      immediate=True)
     if multi:
         for p in out_dir.glob(".summary.part*.json"):
             p.unlink(missing_ok=True)
@@ -299,4 +496,5 @@ def _pid() -> int:
     return jax.process_index()
 
 
-__all__ = ["cmd_transfer_many", "expand_targets", "MESH_SUFFIXES"]
+__all__ = ["check_backend", "check_coordinator", "check_run_paths", "cmd_transfer_many",
+           "expand_targets", "MESH_SUFFIXES"]

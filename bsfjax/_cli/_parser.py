@@ -91,6 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "detected by itself")
     p.add_argument("--num-processes", type=int, help="number of processes (jax.distributed)")
     p.add_argument("--process-id", type=int, help="this process's rank in [0, N)")
+    p.add_argument("--timeout", type=int, default=None, help="seconds jax.distributed may take "
+                   "to start (default 120): an unreachable coordinator or a missing process is "
+                   "then one error line")
     p.set_defaults(func=_cmd_transfer)
 
     p = sub.add_parser("spectrum", help="compute the Laplace-Beltrami spectrum of a mesh")
@@ -132,7 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
 _MANY_ONLY = (("landmarks_file", "--landmarks-file"), ("truth_dir", "--truth-dir"),
               ("mesh_out_dir", "--mesh-out-dir"), ("coordinator", "--coordinator"),
               ("num_processes", "--num-processes"), ("process_id", "--process-id"),
-              ("batch", "--batch"))
+              ("batch", "--batch"), ("timeout", "--timeout"))
 _ONE_ONLY = (("out", "--out"), ("landmarks", "--landmarks"), ("mesh_out", "--mesh-out"),
              ("truth", "--truth"))
 
@@ -140,7 +143,7 @@ _ONE_ONLY = (("out", "--out"), ("landmarks", "--landmarks"), ("mesh_out", "--mes
 #: Options whose value may start with "-" (a negative number, or landmarks "-1,2:3,4"):
 #: argparse would take such a value for an option and answer with its usage text.
 _VALUE_OPTIONS = ("--landmarks", "--seed", "--functions", "--pairs", "--levels", "-k", "--k",
-                  "--threshold", "--num-processes", "--process-id")
+                  "--threshold", "--num-processes", "--process-id", "--timeout")
 
 
 def _join_option_values(argv: list[str]) -> list[str]:

@@ -47,6 +47,9 @@ def _cmd_transfer(args) -> int:
         if args.truth_dir is not None and not args.labels:
             raise CLIError("--truth-dir compares labels: use it with --labels")
         return cmd_transfer_many(args, CLIError)
+    from ._many import check_backend
+
+    check_backend(CLIError)
     return _transfer_one(args)
 
 
@@ -97,6 +100,10 @@ def _transfer_one(args) -> int:
     kmax = min(source.n_vertices, target.n_vertices) - 1
     if not 1 <= k <= kmax:
         raise CLIError(f"-k must be in [1, {kmax}], got {k}")
+    if kind == "estimate":  # the estimate's dense k^2 x k^2 system, before the spectra
+        from .._maps import check_fmap_memory
+
+        check_fmap_memory(k)
     C = p2p = None
     k_spec = min(2 * k, kmax) if kind == "estimate" else k
     if kind == "fmap":

@@ -13,7 +13,7 @@ from ._batched import (
 )
 from ._descriptors import hks, hks_times, wks, wks_energies
 from ._distortion import choose_map, map_distortion, orientation_agreement
-from ._estimation import FmapWeights, estimate_fmap, fmap_energy
+from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap, fmap_energy
 from ._estimate import MapEstimate, check_landmark_pairs, check_starts
 from ._estimator import MapEstimator, estimate_map, mirror_symmetry
 from ._fmap import (
@@ -28,7 +28,7 @@ from ._refine import (
 
 __all__ = [
     "FmapWeights", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
-    "StageConfig", "check_landmark_pairs", "check_options", "check_samples",
+    "StageConfig", "check_fmap_memory", "check_landmark_pairs", "check_options", "check_samples",
     "check_starts", "choose_map", "chunk_for", "default_chunk", "estimate_fmap", "estimate_map",
     "face_geometry", "fmap_energy", "fmap_from_p2p", "fmap_to_p2p", "hks", "hks_times",
     "icp_refine", "map_distortion", "map_stage", "mirror_symmetry", "nearest_neighbors",

@@ -16,7 +16,7 @@ from ._distortion import DISTORTION_SAMPLES, ORIENTATION_SLACK, _agreements, _di
     choose_map
 from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pair_samples, \
     check_starts, check_symmetry, to_given
-from ._estimation import FmapWeights, estimate_fmap
+from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._turn import check_sizes, descriptors, landmarks_from_map, measures_disagree, \
     selection_rows, self_map
@@ -195,6 +195,7 @@ class MapEstimator(eqx.Module):
         if len(starts) > 1 and not meshes:
             raise BSFError("several starts are told apart by the meshes: give source_mesh and "
                            "target_mesh, or a single start")
+        check_fmap_memory(max(k0 for k0, _ in starts + (single,)))  # before any allocation
         source_symmetry = check_symmetry(source_symmetry, source.n_vertices)
         # the estimation runs on the unit-area shapes (float64 rescaling before any float32
         # cast); the maps are converted back to the given bases at the end

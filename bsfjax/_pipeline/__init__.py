@@ -12,9 +12,11 @@ from ._face_labels import (
     face_scores, transfer_face_labels,
 )
 from ._mesh_level import LabelTransfer, REGIMES, transfer_labels, transfer_values
+from ._stages import capped_batch
 
 __all__ = [
-    "FaceShares", "LabelTransfer", "REGIMES", "TargetTransfer", "decide_face_labels",
+    "FaceShares", "LabelTransfer", "REGIMES", "TargetTransfer", "capped_batch",
+    "decide_face_labels",
     "face_label_shares", "face_labels_from_vertices", "face_scores", "process_share",
     "size_bucket", "transfer_collection", "transfer_face_labels", "transfer_labels",
     "transfer_values",

@@ -47,7 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._util import BUCKET_FACTORS, merge_buckets, size_bucket
-from ._stages import StageConfig, dispatch_stages, stages_for
+from ._stages import StageConfig, capped_batch, dispatch_stages, stages_for
 from .._util import BSFError
 from .._maps import face_geometry
 from .._maps import default_chunk
@@ -277,7 +277,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
       float round-off, the same point maps and labels on the tested targets).  On a CPU this
       changes nothing (two 5K targets: 0.76 s batched against 0.77 s one after the other, as
       XLA CPU already uses every core for one target); it is for accelerators, where one
-      target does not fill the device.  Memory grows with ``batch``.
+      target does not fill the device.  Memory grows with ``batch`` (up to the targets per device).
 
     Under ``jax.distributed`` each process yields only its own share of the targets (target
     ``i`` belongs to the process that owns global device ``i mod D``).
@@ -289,7 +289,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     method = as_method(method)
     if method_name(method) == "std2":
         raise BSFError("method 'std2' needs a 2k x 2k map: not supported by transfer_collection")
-    check_int(k, "k", 2)
+    capped_batch(batch, check_int(k, "k", 2))  # (the dense systems: before any work)
     source = _as_mesh(source)
     n_m = source.n_vertices
     vals = source_values(source, values, faces, labels, file_rows)
@@ -440,6 +440,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     targets = list(targets)
     share = process_share(range(len(targets)))
+    batch = capped_batch(batch, k, len(share))  # no padding beyond this process's targets
     read: dict[int, Mesh] = {}  # targets of this process the scan has read, handed to prepare
     merged = _merged_sizes(targets, lm_of, read, share) if pad else {}
     # the group in flight is collected after the next target's host work (module doc)

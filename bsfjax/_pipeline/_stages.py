@@ -18,10 +18,23 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._maps import (StageConfig, map_stage, point_map_stage, problem_stage, source_ops_stage,
-                     spectra)
+from .._maps import (StageConfig, check_fmap_memory, map_stage, point_map_stage, problem_stage,
+                     source_ops_stage, spectra)
 from .._sampling import Subsample
 from .._transfer import Pair, SpectralProjection
+from .._util import check_int
+
+
+def capped_batch(batch: int, k: int, n_targets: int | None = None) -> int:
+    """``batch`` checked and capped at ``n_targets`` per local device: a group short of
+    ``batch`` runs at the full batch size (`dispatch_stages`), so 2 targets at ``batch=1000``
+    held 1000 copies (19 GB).  The ``batch`` dense ``k² × k²`` systems of one device are then
+    checked against the memory available (`bsfjax._maps.check_fmap_memory`), before any work."""
+    check_int(batch, "batch", 1)
+    if n_targets is not None:
+        batch = max(1, min(batch, -(-n_targets // len(jax.local_devices()))))
+    check_fmap_memory(k, batch)
+    return batch
 
 
 @functools.lru_cache(maxsize=64)

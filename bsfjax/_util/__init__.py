@@ -15,8 +15,9 @@ install_sigint_handler()
 from ._buckets import BUCKET_FACTORS, MERGE_PADDING, merge_buckets, size_bucket
 from ._devices import map_over_devices, n_devices, pad_leading, shard_leading
 from ._errors import BSFError, MeshError
-from ._files import atomic_path, check_outputs, output_transaction, write_text_atomic
-from ._memory import release_free_memory
+from ._files import (atomic_path, check_outputs, check_path_clashes, output_transaction,
+                     write_text_atomic)
+from ._memory import available_memory, format_bytes, release_free_memory
 from ._threads import eigensolve_on_one_thread, on_one_blas_thread, one_blas_thread
 from ._version import VERSION
 from ._validate import (
@@ -26,7 +27,7 @@ from ._validate import (
 )
 
 __all__ = [
-    "VERSION",
+    "VERSION", "available_memory", "check_path_clashes", "format_bytes",
     "BSFError", "BUCKET_FACTORS", "MERGE_PADDING", "MeshError", "atomic_path", "check_finite",
     "check_indices", "check_int", "check_outputs", "check_real", "check_source_mesh",
     "compact_labels", "eigensolve_on_one_thread", "exit_now", "homogeneous",

@@ -228,3 +228,37 @@ def check_outputs(outputs: dict[str, str | os.PathLike | None],
         for b in names[i + 1:]:
             if _same(outs[a], outs[b]):
                 raise BSFError(f"{a} and {b} are the same path {str(outs[a])!r}")
+
+
+def check_path_clashes(outputs, inputs=()) -> None:
+    """Check every output path of a command against every input path and against each
+    other, before any work.
+
+    ``outputs`` / ``inputs``: ``(what, path)`` pairs, ``what`` naming the option and the file
+    (``"--out-dir output for target a.off"``).  Paths are compared resolved (symbolic links,
+    ``..``), so a folder given twice under two spellings is one folder.  Raises
+    [`BSFError`][bsfjax.BSFError], one line naming both: an output that is an input would be
+    overwritten (or, existing, taken for a finished output); two equal outputs would replace
+    each other."""
+    def key(p) -> str:
+        r = os.path.realpath(os.fspath(p))
+        return os.path.normcase(r)
+
+    ins: dict[str, tuple[str, str]] = {}
+    for what, p in inputs:
+        if p is not None:
+            ins.setdefault(key(p), (what, os.fspath(p)))
+    outs: dict[str, tuple[str, str]] = {}
+    for what, p in outputs:
+        if p is None:
+            continue
+        k = key(p)
+        if k in ins:
+            iwhat, ip = ins[k]
+            raise BSFError(f"{what} {os.fspath(p)!r} is the same file as the input {iwhat} "
+                           f"{ip!r}: it would be overwritten")
+        if k in outs:
+            owhat, op = outs[k]
+            raise BSFError(f"{owhat} {op!r} and {what} {os.fspath(p)!r} are the same file: "
+                           "one would overwrite the other")
+        outs[k] = (what, os.fspath(p))
