@@ -14,7 +14,7 @@ from ._util import BSFError, MeshError, VERSION
 
 # mesh
 from ._mesh import (
-    ExamplePair, LabelFile, Mesh, MeshReport, example_mesh, example_pair, load_labels,
+    ExamplePair, LabelFile, Mesh, MeshReport, PointCloud, example_mesh, example_pair, load_labels,
     load_mesh, mesh_report, save_labels, save_mesh,
 )
 
@@ -63,7 +63,7 @@ __version__ = VERSION
 __all__ = [
     "BSFError", "MeshError",
     # mesh
-    "Mesh", "MeshReport", "load_mesh", "mesh_report", "save_mesh", "ExamplePair",
+    "Mesh", "MeshReport", "PointCloud", "load_mesh", "mesh_report", "save_mesh", "ExamplePair",
     "example_mesh", "example_pair",
     # operators and spectrum
     "laplacian", "Spectrum", "interval_spectrum", "spectrum", "spectrum_from_operators",
