@@ -14,8 +14,8 @@ from ._util import BSFError, MeshError, VERSION
 
 # mesh
 from ._mesh import (
-    ExamplePair, FileRows, LabelFile, Mesh, MeshReport, example_mesh, example_pair, load_labels,
-    load_mesh, mesh_report, save_labels, save_mesh,
+    ExamplePair, FileRows, LabelFile, Mesh, MeshReport, PointCloud, example_mesh, example_pair,
+    load_labels, load_mesh, mesh_report, save_labels, save_mesh,
 )
 
 # operators and spectrum
@@ -63,7 +63,8 @@ __version__ = VERSION
 __all__ = [
     "BSFError", "MeshError",
     # mesh
-    "Mesh", "FileRows", "MeshReport", "load_mesh", "mesh_report", "save_mesh", "ExamplePair",
+    "Mesh", "FileRows", "MeshReport", "PointCloud", "load_mesh", "mesh_report", "save_mesh",
+    "ExamplePair",
     "example_mesh", "example_pair",
     # operators and spectrum
     "laplacian", "Spectrum", "interval_spectrum", "spectrum", "spectrum_from_operators",

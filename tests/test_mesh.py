@@ -103,7 +103,6 @@ def test_clean_mesh_loads_without_warning(tmp_path):
         ("inf.off", TET.replace("0 1 0\n", "0 inf 0\n", 1), "NaN or infinite"),
         ("range.off", TET.replace("3 1 2 3", "3 1 2 7"), "out of range|cannot read"),
         ("empty.off", "OFF\n0 0 0\n", "empty|no faces|cannot read"),
-        ("nofaces.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", "no faces"),
         ("garbage.off", "this is not a mesh at all\n\x00\x01", "cannot read"),
         ("truncated.ply", "ply\nformat ascii 1.0\nelement vertex 3\n", "cannot read"),
         ("mesh.unknownext", TET, "cannot read"),

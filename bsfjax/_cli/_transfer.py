@@ -74,6 +74,10 @@ def _transfer_one(args) -> int:
         raise CLIError("--map must be 'estimate', 'p2p FILE' or 'fmap FILE'")
     landmarks = _parse_landmarks(args.landmarks)
     source, target = load_mesh(args.source), load_mesh(args.target)
+    for shape, role in ((source, "source"), (target, "target")):
+        if shape.is_point_cloud and kind == "estimate" and landmarks is None:
+            raise CLIError(f"{shape.name}: a point cloud {role} needs --landmarks: the "
+                           "landmark-free map's orientation term needs triangles")
     if landmarks is not None:
         from .._util import check_indices
 
@@ -84,6 +88,9 @@ def _transfer_one(args) -> int:
                           for lm, side, mesh in zip(landmarks, ("source", "target"),
                                                     (source, target)))
     values, names, per_face = read_values(args, source)
+    if per_face and target.is_point_cloud:
+        raise CLIError(f"{target.name}: per-triangle labels need a triangle target; a point "
+                       "cloud has none (give one label per source vertex)")
     if args.labels and (is_json(args.out) if per_face else is_face_file(args.out)):
         kinds = "triangle: write .seg," if per_face else "vertex: write .json,"
         raise CLIError(f"--out {args.out}: the labels are per {kinds} .txt or .npy")

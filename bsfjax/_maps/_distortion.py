@@ -45,7 +45,7 @@ from .._util import BSFError
 from .._sampling import geodesic_distances
 from .._mesh import Mesh
 from .._sampling import farthest_point_sampling
-from .._util import check_indices, check_int, check_real
+from .._util import check_indices, check_int, check_real, require_triangles
 
 __all__ = ["map_distortion", "orientation_agreement", "choose_map", "DISTORTION_SAMPLES",
            "ORIENTATION_SLACK"]
@@ -188,6 +188,9 @@ def orientation_agreement(source_mesh: Mesh, target_mesh: Mesh, p2p):
     orientation, 0 for a mirror image; faces whose three images are not distinct do not count.
     """
     maps, single = _check_pair(source_mesh, target_mesh, p2p)
+    for m in (source_mesh, target_mesh):
+        require_triangles(m, "the orientation agreement needs triangles: a point cloud has "
+                          "none")
     out = _agreements(source_mesh, target_mesh, maps)
     return float(out[0]) if single else out
 

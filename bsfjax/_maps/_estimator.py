@@ -22,7 +22,8 @@ from ._turn import check_sizes, descriptors, landmarks_from_map, measures_disagr
     selection_rows, self_map
 from .._sampling import Subsample, subsample
 from .._spectral import Spectrum, unit_area_pair
-from .._util import BSFError, check_int, check_real, check_source_mesh, on_one_blas_thread
+from .._util import (BSFError, check_int, check_real, check_source_mesh, on_one_blas_thread,
+                     require_triangles)
 
 __all__ = ["MapEstimate", "MapEstimator", "estimate_map", "mirror_symmetry"]
 
@@ -186,6 +187,11 @@ class MapEstimator(eqx.Module):
 
         a [`MapEstimate`][bsfjax.MapEstimate].
         """
+        if landmarks is None:
+            for mesh, role in ((source_mesh, "source"), (target_mesh, "target")):
+                require_triangles(mesh, f"a point cloud {role} needs landmarks: the "
+                                  "landmark-free map's orientation term needs triangles "
+                                  "(give two or more landmark pairs)")
         refine_to = check_sizes(self.k, self.refine_to, min(source.k, target.k))
         lm = check_landmark_pairs(landmarks, source.n_vertices, target.n_vertices)
         meshes = source_mesh is not None and target_mesh is not None
@@ -261,6 +267,8 @@ class MapEstimator(eqx.Module):
         if not isinstance(spectrum, Spectrum):
             raise BSFError(f"spectrum must be a bsfjax.Spectrum, got {type(spectrum).__name__}")
         check_source_mesh(mesh, spectrum.n_vertices, spectrum.mass)
+        require_triangles(mesh, "a point cloud has no mirror symmetry here: its orientation "
+                          "term needs triangles")
         refine_to = check_sizes(self.k, self.refine_to, spectrum.k)
         if samples is None and self.zoomout_samples is not None:
             samples = subsample(mesh, check_int(self.zoomout_samples, "samples", 1))

@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._util import BSFError
+from .._util import BSFError, require_triangles
 from .._mesh import Mesh
 from .._spectral import Spectrum, unit_area_pair
 
@@ -164,6 +164,8 @@ def _geometries(mesh, spectrum_shape, name: str):
                            f"spectra), got {type(m).__name__}")
         if m.n_vertices != n:
             raise BSFError(f"{name} has {m.n_vertices} vertices but its spectrum has {n}")
+        require_triangles(m, "a point cloud has no orientation term: it needs triangles "
+                          "(give landmarks instead)")
     if len({m.n_faces for m in meshes}) != 1:
         raise BSFError(f"{name}: stacked meshes must have equal face counts, got "
                        f"{[m.n_faces for m in meshes]}")

@@ -1,6 +1,6 @@
 """The mesh stage: a triangle mesh and its files.
 
-`Mesh` (vertices, triangles, cleaning of unreferenced vertices and degenerate faces, areas,
+`Mesh` (vertices, triangles, or none: a `PointCloud`, cleaning of unreferenced vertices and degenerate faces, areas,
 edges, components), reading and writing mesh files (OFF, PLY, OBJ, STL, ... through meshio,
 with fast paths for plain OFF/PLY), segmentation files (`.txt` / `.npy`, SMPL's `.json`,
 per-triangle `.seg`), loop subdivision, and the built-in example pair.
@@ -9,15 +9,16 @@ per-triangle `.seg`), loop subdivision, and the built-in example pair.
 from ._example import ExamplePair, JOINTS, LABEL_NAMES, POSES, example_mesh, example_pair
 from ._label_files import LabelFile, is_face_file, load_labels, read_label_file, save_labels
 from ._clean import MeshReport, clean_mesh, mesh_report
-from ._graph import edge_graph, graph_from_edges, mesh_edges, n_components
-from ._mesh import FileRows, Mesh
+from ._graph import edge_graph, graph_from_edges, knn_edges, mesh_edges, n_components
+from ._points import sample_surface
+from ._mesh import FileRows, Mesh, PointCloud
 from ._readers import load_mesh
 from ._mesh_write import save_mesh
 from ._subdivision import subdivide
 
 __all__ = [
     "ExamplePair", "FileRows", "JOINTS", "LABEL_NAMES", "LabelFile", "Mesh", "MeshReport", "POSES",
-    "clean_mesh", "edge_graph", "example_mesh", "example_pair", "graph_from_edges",
-    "is_face_file", "load_labels", "load_mesh", "mesh_edges", "mesh_report", "n_components",
-    "read_label_file", "save_labels", "save_mesh", "subdivide",
+    "PointCloud", "clean_mesh", "edge_graph", "example_mesh", "example_pair", "graph_from_edges",
+    "is_face_file", "knn_edges", "load_labels", "load_mesh", "mesh_edges", "mesh_report",
+    "n_components", "read_label_file", "sample_surface", "save_labels", "save_mesh", "subdivide",
 ]

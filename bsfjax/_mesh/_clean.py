@@ -57,6 +57,10 @@ def mesh_report(mesh: "Mesh") -> MeshReport:
     ``load_mesh`` removes degenerate faces and isolated vertices and warns about duplicate
     vertices and non-manifold edges; [`bsfjax.spectrum`][bsfjax.spectrum] warns about several components.
     Cost: a few sorts of the ``(m, 3)`` faces and ``(n, 3)`` vertices.
+
+    A [`PointCloud`][bsfjax.PointCloud] has no faces, so no face defects, no isolated
+    points and no edges to be non-manifold or on a boundary (all 0); its duplicate points are
+    counted, and its components are those of its k-nearest-neighbour graph.
     """
     if not isinstance(mesh, Mesh):
         raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
@@ -65,7 +69,7 @@ def mesh_report(mesh: "Mesh") -> MeshReport:
     degenerate = int(np.sum(repeated | (mesh.face_areas() == 0)))
     dup_faces = f.shape[0] - np.unique(_row_keys(np.sort(f, axis=1))).shape[0]
     dup_verts = mesh.n_vertices - np.unique(_row_keys(mesh.vertices + 0.0)).shape[0]  # −0 → +0
-    used = np.zeros(mesh.n_vertices, dtype=bool)
+    used = np.full(mesh.n_vertices, mesh.is_point_cloud)
     used[f.ravel()] = True
     edges, face_edges = mesh_edges(f)
     per_edge = np.bincount(face_edges.ravel(), minlength=len(edges))
@@ -73,7 +77,8 @@ def mesh_report(mesh: "Mesh") -> MeshReport:
         n_vertices=mesh.n_vertices, n_faces=mesh.n_faces, degenerate_faces=degenerate,
         duplicate_faces=int(dup_faces), duplicate_vertices=int(dup_verts),
         isolated_vertices=int((~used).sum()), non_manifold_edges=int(np.sum(per_edge > 2)),
-        boundary_edges=int(np.sum(per_edge == 1)), components=n_components(mesh, edges))
+        boundary_edges=int(np.sum(per_edge == 1)),
+        components=n_components(mesh, None if mesh.is_point_cloud else edges))
 
 
 def _warn_defects(mesh: "Mesh", stacklevel: int) -> None:

@@ -17,7 +17,7 @@ import numpy as np
 
 from .._util import MeshError
 
-__all__ = ["FileRows", "Mesh", "MeshError", "MAX_COORDINATE"]
+__all__ = ["FileRows", "Mesh", "MeshError", "MAX_COORDINATE", "PointCloud"]
 
 
 #: Largest accepted ``|coordinate|``.  Face areas are norms of cross products of edges, whose
@@ -89,6 +89,8 @@ class Mesh:
     name: str | None = None
     file_rows: FileRows | None = None
 
+    _POINTS = False  # (a class attribute, not a field) a PointCloud: zero faces are its form
+
     def __post_init__(self):
         where = f"{self.name}: " if self.name else ""
         try:
@@ -119,15 +121,15 @@ class Mesh:
                             f"(squared lengths, areas); the limit is {MAX_COORDINATE:.0e}")
         if f.ndim != 2 or f.shape[1] != 3:
             raise MeshError(f"{where}faces must have shape (m, 3), got {f.shape}")
-        if f.shape[0] == 0:
-            raise MeshError(f"{where}mesh has no faces")
+        if f.shape[0] == 0 and not self._POINTS:
+            raise MeshError(f"{where}mesh has no faces (a point cloud is a bsfjax.PointCloud)")
         if not np.issubdtype(f.dtype, np.integer):
             if np.issubdtype(f.dtype, np.floating) and np.all(np.mod(f, 1) == 0):
                 f = f.astype(np.int64)
             else:
                 raise MeshError(f"{where}faces must be integer indices, got dtype {f.dtype}")
         f = f.astype(np.int64)
-        lo, hi = int(f.min()), int(f.max())
+        lo, hi = (int(f.min()), int(f.max())) if f.size else (0, 0)
         if lo < 0 or hi >= v.shape[0]:
             raise MeshError(
                 f"{where}face indices out of range: found [{lo}, {hi}] for {v.shape[0]} vertices"
@@ -151,6 +153,11 @@ class Mesh:
     @property
     def n_faces(self) -> int:
         return int(self.faces.shape[0])
+
+    @property
+    def is_point_cloud(self) -> bool:
+        """``True`` for a [`PointCloud`][bsfjax.PointCloud]: points without triangles."""
+        return self._POINTS
 
     def face_areas(self) -> np.ndarray:
         """``(m,)`` triangle areas ½‖(v₁−v₀)×(v₂−v₀)‖."""
@@ -282,3 +289,47 @@ class Mesh:
     def __repr__(self) -> str:
         name = f", name={self.name!r}" if self.name else ""
         return f"Mesh(n_vertices={self.n_vertices}, n_faces={self.n_faces}{name})"
+
+
+class PointCloud(Mesh):
+    """Points without triangles (a scan saved as points): a [`Mesh`][bsfjax.Mesh] with zero
+    faces, so that every function that takes a mesh takes it.
+
+    ``PointCloud(points)`` with ``points`` an ``(n, 3)`` array; [`load_mesh`][bsfjax.load_mesh]
+    returns one for a file with vertices and no faces (PLY, OBJ, OFF, ``.xyz``).  Every point
+    keeps its row: nothing is dropped, merged or reordered (duplicate points included), so
+    ``vertex_ids`` is ``None``.  `faces` is an empty ``(0, 3)`` array, `is_point_cloud` is
+    ``True``, `area` is the lumped area of the point-cloud Laplacian.
+
+    What changes for a point cloud: [`laplacian`][bsfjax.laplacian] and
+    [`spectrum`][bsfjax.spectrum] use the point-cloud Laplacian of Sharp & Crane 2020
+    (robust-laplacian's ``point_cloud_laplacian``; its mass is a lumped area per point);
+    geodesic distances and ``"geodesic"`` farthest point sampling run Dijkstra on the
+    symmetrized k-nearest-neighbour graph (`bsfjax.internal.edge_graph`).  What
+    needs triangles refuses with a line that says so: the landmark-free map (its orientation
+    term), per-triangle labels, the heat method, subdivision.
+    """
+
+    _POINTS = True
+
+    def __init__(self, vertices, faces=None, vertex_ids=None, name: str | None = None):
+        if faces is not None and np.asarray(faces).size:
+            raise MeshError(f"{name + ': ' if name else ''}a PointCloud has no faces; "
+                            "use bsfjax.Mesh for a triangle mesh")
+        super().__init__(vertices, np.zeros((0, 3), np.int64), vertex_ids, name)
+
+    @property
+    def points(self) -> np.ndarray:
+        """The ``(n, 3)`` coordinates (the same array as `vertices`)."""
+        return self.vertices
+
+    @property
+    def area(self) -> float:
+        """The total lumped area of the point-cloud Laplacian (Sharp & Crane 2020)."""
+        import robust_laplacian
+
+        return float(robust_laplacian.point_cloud_laplacian(np.asarray(self.vertices))[1].sum())
+
+    def __repr__(self) -> str:
+        name = f", name={self.name!r}" if self.name else ""
+        return f"PointCloud(n_points={self.n_vertices}{name})"

@@ -1,7 +1,9 @@
 """Reading mesh files with [`load_mesh`][bsfjax.load_mesh]. Owner of bsfjax's strict ASCII OFF
 reader and its one-pass numpy fast path for the common layout (`_read_off`,
 `_read_plain_off`), the PLY header check that guards meshio (`_check_ply`) and the meshio path
-for every other format (`_read_meshio`, polygons fan-triangulated by `_triangulate`).
+for every other format (`_read_meshio`, polygons fan-triangulated by `_triangulate`), and the
+``.xyz`` point reader (`_read_xyz`).  A file with vertices and no faces is a
+[`PointCloud`][bsfjax.PointCloud].
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 
 from .._util import MeshError
 from ._clean import clean_mesh
-from ._mesh import Mesh
+from ._mesh import Mesh, PointCloud
 
 __all__ = ["load_mesh"]
 
@@ -246,15 +248,49 @@ def _read_meshio(p: Path) -> tuple[np.ndarray, np.ndarray]:
     return pts, faces
 
 
+def _read_xyz(p: Path) -> tuple[np.ndarray, np.ndarray]:
+    """An ``.xyz`` point file: one point per row, ``x y z`` first (more columns, such
+    as normals or colours, are ignored), blank lines and ``#`` comments skipped."""
+    try:
+        text = p.read_bytes().decode("ascii")
+    except UnicodeDecodeError as exc:
+        raise MeshError(f"{p}: cannot read points (not an ASCII .xyz file)") from exc
+    rows = []
+    for i, line in enumerate(text.splitlines()):
+        tok = line.split("#", 1)[0].replace(",", " ").split()
+        if not tok:
+            continue
+        if len(tok) < 3:
+            raise MeshError(f"{p}: cannot read points (line {i + 1} has {len(tok)} numbers; "
+                            "every row needs x y z)")
+        rows.append(tok[:3])
+    if not rows:
+        raise MeshError(f"{p}: mesh is empty (0 vertices)")
+    try:
+        pts = np.array(rows, dtype=np.float64)
+    except ValueError as exc:
+        raise MeshError(f"{p}: cannot read points (bad number: {exc})") from exc
+    return pts, np.zeros((0, 3), np.int64)
+
+
+POINT_SUFFIXES = (".xyz",)
+
+
 def load_mesh(path: str | os.PathLike) -> Mesh:
     """Read a triangle or polygon mesh (OFF, PLY, OBJ, STL, and whatever else meshio reads).
 
-    OFF goes through bsfjax's own strict ASCII reader; other formats through meshio.
-    Polygons are fan-triangulated; zero-area faces and unreferenced vertices are removed with a
-    warning that says how many ([`Mesh.to_file_rows`][bsfjax.Mesh.to_file_rows] maps results back
-    to the file's rows).  Missing or
-    unreadable files, NaN/inf coordinates, out-of-range face indices and meshes without faces
-    raise [`MeshError`][bsfjax.MeshError] naming the file.
+    OFF goes through bsfjax's own strict ASCII reader; ``.xyz`` (one ``x y z`` row
+    per point) through a plain text reader; other formats through meshio.  Polygons are
+    fan-triangulated; zero-area faces and unreferenced vertices are removed with a warning that
+    says how many ([`Mesh.to_file_rows`][bsfjax.Mesh.to_file_rows] maps results back
+    to the file's rows).
+
+    A file with vertices and no faces (PLY or OBJ with vertices only, an OFF with 0 faces, an
+    ``.xyz`` file) gives a [`PointCloud`][bsfjax.PointCloud]: every point in its file row,
+    none dropped or reordered.
+
+    Missing or unreadable files, NaN/inf coordinates and out-of-range face indices raise
+    [`MeshError`][bsfjax.MeshError] naming the file.
     """
     if not isinstance(path, (str, os.PathLike)):
         raise MeshError(f"path must be a str or os.PathLike, got {type(path).__name__}")
@@ -264,9 +300,15 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     if p.is_dir():
         raise MeshError(f"{p}: is a directory, not a mesh file")
     try:
-        pts, faces = _read_off(p) if p.suffix.lower() == ".off" else _read_meshio(p)
+        suffix = p.suffix.lower()
+        if suffix == ".off":
+            pts, faces = _read_off(p)
+        elif suffix in POINT_SUFFIXES:
+            pts, faces = _read_xyz(p)
+        else:
+            pts, faces = _read_meshio(p)
     except OSError as exc:
         raise MeshError(f"{p}: cannot read file ({exc.strerror or exc})") from exc
     if faces.shape[0] == 0:
-        raise MeshError(f"{p}: mesh has no faces (only triangle/polygon meshes are supported)")
+        return PointCloud(pts, name=str(p))
     return clean_mesh(pts, faces, name=str(p))

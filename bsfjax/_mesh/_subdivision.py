@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .._util import BSFError
+from .._util import BSFError, require_triangles
 from ._graph import mesh_edges
 from ._mesh import Mesh
 
@@ -74,6 +74,7 @@ def subdivide(mesh: Mesh, scheme: str = "loop", levels: int = 1) -> Mesh:
     result is the (moved, for Loop) vertex ``i`` of the input, so per-vertex correspondences of
     the coarse mesh carry over to the first ``n`` vertices.
     """
+    require_triangles(mesh, "a point cloud cannot be subdivided: subdivision splits triangles")
     if scheme not in ("loop", "midpoint"):
         raise BSFError(f"scheme must be 'loop' or 'midpoint', got {scheme!r}")
     if not isinstance(levels, (int, np.integer)) or levels < 0:

@@ -32,7 +32,7 @@ from .._util import BSFError
 from ._mesh_level import LabelTransfer, _decide_labels, _split_label_kwargs, transfer_values
 from .._mesh import Mesh
 from .._spectral import Spectrum
-from .._util import check_source_mesh, compact_labels
+from .._util import check_source_mesh, compact_labels, require_triangles
 
 __all__ = ["FaceShares", "face_label_shares", "face_scores", "transfer_face_labels",
            "decide_face_labels", "face_labels_from_vertices"]
@@ -135,6 +135,8 @@ def transfer_face_labels(source: Spectrum, target: Spectrum, face_labels: Int[Ar
         if not isinstance(mesh, Mesh):
             raise BSFError(f"{role}_mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
         check_source_mesh(mesh, spec.n_vertices, spec.mass, f"{role}_mesh", role)
+        require_triangles(mesh, f"per-triangle labels need a triangle {role}: a point "
+                          "cloud has none (transfer per-vertex labels: bsfjax.transfer_labels)")
     if "mesh" in kwargs:
         raise BSFError("transfer_face_labels passes source_mesh on as mesh: do not give mesh=")
     ids, shares = face_label_shares(source_mesh, face_labels)

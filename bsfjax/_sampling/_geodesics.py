@@ -4,7 +4,8 @@ Two distance methods (numpy/scipy, float64; they are graph/sparse-solve algorith
 the jitted spectral pipeline):
 
 * ``"dijkstra"`` — shortest paths along mesh edges weighted by their length
-  (``scipy.sparse.csgraph.dijkstra``).  An upper bound of the geodesic distance on the mesh
+  (``scipy.sparse.csgraph.dijkstra``); on a point cloud, along the edges of its symmetrized
+  8-nearest-neighbour graph.  An upper bound of the geodesic distance on the mesh
   surface, since paths are restricted to edges: a few percent too long on well-shaped meshes
   (7 % on an icosphere, 18 % across a grid with all diagonals one way).
 * ``"heat"`` — the heat method of Crane, Weischedel & Wardetzky 2013, with this package's
@@ -30,7 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph
 import scipy.sparse.linalg
 
-from .._util import BSFError
+from .._util import BSFError, require_triangles
 from .._spectral import laplacian
 from .._mesh import Mesh, edge_graph, mesh_edges
 
@@ -167,6 +168,8 @@ def _distance_fn(mesh: Mesh, method: str):
     if method == "dijkstra":
         graph = edge_graph(mesh)
         return lambda src: scipy.sparse.csgraph.dijkstra(graph, directed=False, indices=src)
+    require_triangles(mesh, "a point cloud has no triangles for the heat method: use "
+                      "method='dijkstra' (shortest paths in its k-nearest-neighbour graph)")
     return _HeatSolver(mesh).distances
 
 

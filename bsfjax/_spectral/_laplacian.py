@@ -17,9 +17,36 @@ import scipy.sparse as sp
 from .._util import BSFError, MeshError
 from .._mesh import Mesh
 
-__all__ = ["laplacian", "cotangent_stiffness", "mass_matrix"]
+__all__ = ["laplacian", "cotangent_stiffness", "mass_matrix", "POINT_CLOUD_NEIGHBORS"]
 
 MASS_TYPES = ("mixed", "barycentric")
+
+#: Neighbours of each point in the point-cloud Laplacian's local triangulations (robust-laplacian's
+#: default), fewer on a cloud with fewer points.
+POINT_CLOUD_NEIGHBORS = 30
+
+
+def _point_cloud_laplacian(mesh: Mesh) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """Sharp & Crane 2020's point-cloud Laplacian (robust-laplacian): the intrinsic-Delaunay
+    Laplacian of the union of local tangent-plane triangulations (tufted cover) of every point's
+    ``POINT_CLOUD_NEIGHBORS`` nearest neighbours, and its lumped (Voronoi) area.  Duplicate
+    points are kept: their mollified zero-length edges tie them together with a large weight,
+    so their eigenvector values agree and no spurious zero eigenvalue appears."""
+    import robust_laplacian
+
+    v = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+    where = f"{mesh.name}: " if mesh.name else ""
+    if v.shape[0] < 4:
+        raise MeshError(f"{where}a point cloud needs at least 4 points for its Laplacian, got "
+                        f"{v.shape[0]}")
+    nn = min(POINT_CLOUD_NEIGHBORS, v.shape[0] - 1)
+    W, A = robust_laplacian.point_cloud_laplacian(v, n_neighbors=nn)
+    W, A = sp.csr_matrix(W), sp.csr_matrix(A)
+    a = A.diagonal()
+    if not (np.isfinite(W.data).all() and np.isfinite(a).all()) or np.any(a <= 0):
+        raise MeshError(f"{where}point-cloud Laplacian has {int(np.sum(~(a > 0)))} points with "
+                        "zero or undefined area (coplanar or collinear neighbourhoods?)")
+    return W, A
 
 
 def _corner_geometry(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -58,7 +85,10 @@ def _stiffness(f: np.ndarray, cots: np.ndarray, n: int) -> sp.csr_matrix:
 
 
 def cotangent_stiffness(mesh: Mesh) -> sp.csr_matrix:
-    """Positive semidefinite cotangent stiffness matrix ``W`` (n × n, CSR, float64)."""
+    """Positive semidefinite cotangent stiffness matrix ``W`` (n × n, CSR, float64); of a
+    point cloud, the point-cloud Laplacian's (see [`laplacian`][bsfjax.laplacian])."""
+    if mesh.is_point_cloud:
+        return _point_cloud_laplacian(mesh)[0]
     cots, _, _ = _corner_geometry(mesh.vertices, mesh.faces)
     return _stiffness(mesh.faces, cots, mesh.n_vertices)
 
@@ -88,6 +118,8 @@ def mass_matrix(mesh: Mesh, kind: str = "mixed") -> sp.csr_matrix:
     """
     if kind not in MASS_TYPES:
         raise BSFError(f"mass must be one of {MASS_TYPES}, got {kind!r}")
+    if mesh.is_point_cloud:
+        return _point_cloud_laplacian(mesh)[1]
     cots, dbl_area, sq = _corner_geometry(mesh.vertices, mesh.faces)
     return sp.diags(_mass(mesh.faces, cots, dbl_area, sq, mesh.n_vertices, kind)).tocsr()
 
@@ -105,12 +137,21 @@ def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp
       (``pip install robust-laplacian``), for non-manifold or badly triangulated meshes.
       Its mass is the lumped intrinsic Voronoi area.
 
+    A [`PointCloud`][bsfjax.PointCloud] gets the point-cloud Laplacian of Sharp & Crane 2020
+    (robust-laplacian's ``point_cloud_laplacian``, 30 neighbours per point), whatever `mass`
+    and `robust` say: ``A`` is each point's lumped area, so everything downstream of the
+    spectrum treats the cloud like a mesh.
+
     **Returns:**
 
     ``(W, A)``: ``W`` symmetric PSD with ``W·1 = 0``; ``A`` diagonal with positive entries.
     """
     if not isinstance(mesh, Mesh):
         raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
+    if mesh.is_point_cloud:
+        if mass not in MASS_TYPES:
+            raise BSFError(f"mass must be one of {MASS_TYPES}, got {mass!r}")
+        return _point_cloud_laplacian(mesh)
     if robust:
         try:
             import robust_laplacian

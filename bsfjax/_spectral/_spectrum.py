@@ -297,7 +297,7 @@ def spectrum(mesh: Mesh, k: int, *, mass: str = "mixed", robust: bool = False,
         cached = _load_cached(path, n, k)
         if cached is not None:
             return cached
-    comps = n_components(mesh)
+    comps = n_components(mesh)  # of a point cloud: of its k-nearest-neighbour graph
     if comps > 1:
         where = f"{mesh.name}: " if mesh.name else ""
         warnings.warn(f"{where}mesh has {comps} connected components, so its first {comps} "

@@ -22,8 +22,8 @@ from ._threads import eigensolve_on_one_thread, on_one_blas_thread, one_blas_thr
 from ._version import VERSION
 from ._validate import (
     check_finite, check_indices, check_int, check_real, check_source_mesh, compact_labels,
-    homogeneous, is_traced, magnitude_limit, non_integer_entry, pow2_scale, restore_scale,
-    unit_scale,
+    homogeneous, is_traced, magnitude_limit, non_integer_entry, pow2_scale, require_triangles,
+    restore_scale, unit_scale,
 )
 
 __all__ = [
@@ -34,5 +34,5 @@ __all__ = [
     "install_sigint_handler", "is_cli_process", "is_traced", "magnitude_limit",
     "map_over_devices", "merge_buckets", "n_devices", "non_integer_entry", "on_one_blas_thread",
     "one_blas_thread", "output_transaction", "pad_leading", "pow2_scale", "release_free_memory",
-    "restore_scale", "shard_leading", "size_bucket", "unit_scale", "write_text_atomic",
+    "require_triangles", "restore_scale", "shard_leading", "size_bucket", "unit_scale", "write_text_atomic",
 ]

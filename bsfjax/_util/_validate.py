@@ -14,7 +14,7 @@ import numpy as np
 
 from ._errors import BSFError
 
-__all__ = ["is_traced", "check_finite", "check_real", "check_int", "magnitude_limit",
+__all__ = ["require_triangles", "is_traced", "check_finite", "check_real", "check_int", "magnitude_limit",
            "check_indices", "compact_labels", "check_source_mesh", "unit_scale", "restore_scale",
            "pow2_scale", "homogeneous"]
 
@@ -144,6 +144,8 @@ def check_source_mesh(mesh, n_vertices: int, mass, name: str = "mesh",
                        f"{name}= must be the {role} mesh")
     if not hasattr(mesh, "faces") or mass is None or is_traced(mass):
         return
+    if getattr(mesh, "is_point_cloud", False):
+        return  # (its area is the Laplacian's lumped area: the count check is what is cheap)
     v = np.asarray(mesh.vertices, np.float64)
     f = np.asarray(mesh.faces)
     area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]),
@@ -153,6 +155,15 @@ def check_source_mesh(mesh, n_vertices: int, mass, name: str = "mesh",
         raise BSFError(f"{name} has total area {area:.6g} but the {role} spectrum's areas sum "
                        f"to {total:.6g}: {name}= must be the {role} mesh (the one the {role} "
                        "spectrum was computed on)")
+
+
+def require_triangles(mesh, why: str) -> None:
+    """Raise [`BSFError`][bsfjax.BSFError] with the one line ``why`` (what needs triangles,
+    and what to do instead) when ``mesh`` is a point cloud (a
+    [`bsfjax.PointCloud`][bsfjax.PointCloud]); the file's name is appended."""
+    if getattr(mesh, "is_point_cloud", False):
+        where = f" ({mesh.name})" if getattr(mesh, "name", None) else ""
+        raise BSFError(f"{why}{where}")
 
 
 def unit_scale(f, dtype):

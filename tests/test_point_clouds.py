@@ -1,0 +1,199 @@
+"""Point clouds (files with points and no faces): reading, their Laplacian, a transfer from a
+mesh to a cloud, the clear refusals of what needs triangles, and the command line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import bsfjax
+from bsfjax.cli import main
+from bsfjax.internal import edge_graph, example_landmarks, mass_matrix, sample_surface
+
+
+def _fibonacci_sphere(n: int) -> np.ndarray:
+    """``n`` evenly spread points on the unit sphere (the Fibonacci lattice)."""
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    r, phi = np.sqrt(1 - z * z), np.pi * (1 + 5 ** 0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def _sphere_points(n: int, seed: int = 0) -> np.ndarray:
+    p = np.random.default_rng(seed).normal(size=(n, 3))
+    return p / np.linalg.norm(p, axis=1, keepdims=True)
+
+
+# reading ------------------------------------------------------------------------------------
+
+def test_point_files_read_as_point_clouds_in_row_order(tmp_path):
+    pts = np.random.default_rng(1).normal(size=(50, 3))
+    pts[7] = pts[3]  # a duplicate point keeps its own row
+    rows = pts.tolist()  # Python floats: repr round-trips exactly
+    (tmp_path / "c.xyz").write_text("# a scan\n" + "".join(
+        f"{x!r} {y!r} {z!r} 0 0 1\n" if i % 2 else f"{x!r}, {y!r}, {z!r}\n\n"
+        for i, (x, y, z) in enumerate(rows)))
+    (tmp_path / "c.obj").write_text("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in rows))
+    bsfjax.save_mesh(tmp_path / "c.ply", bsfjax.PointCloud(pts))
+    (tmp_path / "c.off").write_text(f"OFF\n{len(pts)} 0 0\n" + "".join(
+        f"{x!r} {y!r} {z!r}\n" for x, y, z in rows))
+    for name in ("c.xyz", "c.obj", "c.ply", "c.off"):
+        cloud = bsfjax.load_mesh(tmp_path / name)
+        assert isinstance(cloud, bsfjax.PointCloud) and cloud.is_point_cloud, name
+        assert cloud.n_faces == 0 and cloud.vertex_ids is None
+        np.testing.assert_array_equal(cloud.points, pts, err_msg=name)
+
+
+def test_meshes_are_not_point_clouds_and_a_mesh_still_needs_faces(sphere_mesh):
+    assert not sphere_mesh.is_point_cloud
+    with pytest.raises(bsfjax.MeshError, match="no faces.*PointCloud"):
+        bsfjax.Mesh(np.eye(3), np.zeros((0, 3), int))
+    with pytest.raises(bsfjax.MeshError, match="has no faces"):
+        bsfjax.PointCloud(sphere_mesh.vertices, sphere_mesh.faces)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("1 2\n", "every row needs x y z"),
+    ("1 2 x\n", "bad number"),
+    ("# nothing\n", "empty"),
+    ("1 2 nan\n3 4 5\n", "NaN"),
+])
+def test_bad_xyz_files_are_one_clear_error(tmp_path, text, match):
+    (tmp_path / "bad.xyz").write_text(text)
+    with pytest.raises(bsfjax.MeshError, match=match):
+        bsfjax.load_mesh(tmp_path / "bad.xyz")
+
+
+# the Laplacian -----------------------------------------------------------------------------
+
+def test_laplacian_is_robust_laplacians_point_cloud_laplacian():
+    import robust_laplacian
+
+    pts = _sphere_points(400)
+    W, A = bsfjax.laplacian(bsfjax.PointCloud(pts))
+    W0, A0 = robust_laplacian.point_cloud_laplacian(pts, n_neighbors=30)
+    assert W.dtype == np.float64 and A.dtype == np.float64
+    assert abs(W - sp.csr_matrix(W0)).max() == 0 and abs(A - sp.csr_matrix(A0)).max() == 0
+    np.testing.assert_allclose(np.asarray(W.sum(axis=1)).ravel(), 0, atol=1e-9)
+    np.testing.assert_allclose(mass_matrix(bsfjax.PointCloud(pts)).diagonal(), A.diagonal())
+
+
+def test_spectrum_of_a_sampled_sphere_is_close_to_the_closed_form():
+    """Unit sphere: λ = l(l + 1) with multiplicity 2l + 1; the lumped areas sum to 4π.
+    (Evenly spread points: 3000 random ones give eigenvalues ~6 % low.)"""
+    cloud = bsfjax.PointCloud(_fibonacci_sphere(3000))
+    s = bsfjax.spectrum(cloud, 16)
+    exact = np.repeat([0.0, 2.0, 6.0, 12.0], [1, 3, 5, 7])
+    np.testing.assert_allclose(s.evals, exact, rtol=0.01, atol=1e-8)
+    assert abs(np.sum(s.mass) - 4 * np.pi) < 1e-3 * 4 * np.pi
+    assert abs(cloud.area - np.sum(s.mass)) < 1e-9
+
+
+def test_duplicate_points_keep_their_rows_and_add_no_zero_eigenvalue():
+    pts = _sphere_points(600)
+    dup = np.concatenate([pts, pts[:20]])
+    s = bsfjax.spectrum(bsfjax.PointCloud(dup), 8)
+    assert s.evecs.shape == (620, 8) and np.all(np.asarray(s.mass) > 0)
+    assert s.evals[1] > 1.0  # one zero eigenvalue: the copies are tied to their originals
+    ev = np.asarray(s.evecs)
+    np.testing.assert_allclose(ev[600:], ev[:20], atol=1e-3 * np.abs(ev).max())
+
+
+def test_geodesics_and_sampling_work_on_the_knn_graph():
+    pts = _sphere_points(2000)
+    cloud = bsfjax.PointCloud(pts)
+    d = bsfjax.geodesic_distances(cloud, [0])[0]
+    great = np.arccos(np.clip(pts @ pts[0], -1, 1))
+    assert np.all(np.isfinite(d)) and np.all(d >= 2 * np.sin(great / 2) - 1e-6)  # ≥ the chord
+    assert np.median(d[great > 0.5] / great[great > 0.5]) < 1.25  # graph paths: a bit longer
+    g = edge_graph(cloud)
+    assert g.shape == (2000, 2000) and (g != g.T).nnz == 0
+    for metric in ("euclidean", "geodesic"):
+        idx = bsfjax.farthest_point_sampling(cloud, 30, metric=metric)
+        assert len(np.unique(idx)) == 30
+    report = bsfjax.mesh_report(bsfjax.PointCloud(np.concatenate([pts, pts[:3]])))
+    assert report.duplicate_vertices == 3 and report.components == 1
+    assert report.n_faces == report.boundary_edges == report.isolated_vertices == 0
+
+
+# a transfer mesh -> point cloud ----------------------------------------------------------
+
+def test_transfer_from_a_faust_mesh_to_a_cloud_sampled_from_another_pose():
+    from scipy.spatial import cKDTree
+
+    from tests.conftest import data_path
+
+    src = bsfjax.load_mesh(data_path("faust", "tr_reg_000.off"))
+    tgt = bsfjax.load_mesh(data_path("faust", "tr_reg_010.off"))
+    parts = bsfjax.load_labels(data_path("segmentations", "smpl_vert_segmentation.json"))
+    pts, _, _ = sample_surface(tgt, 6000, seed=0)
+    cloud = bsfjax.PointCloud(pts)
+    truth = parts.labels[cKDTree(tgt.vertices).query(pts)[1]]
+    lm = [412, 3216, 5907, 6296, 2445]
+    lm_cloud = cKDTree(pts).query(tgt.vertices[lm])[1]
+    sm, sn = bsfjax.spectrum(src, 100), bsfjax.spectrum(cloud, 100)
+    est = bsfjax.estimate_map(sm, sn, landmarks=(lm, lm_cloud), source_mesh=src,
+                              target_mesh=cloud)
+    seg = bsfjax.transfer_labels(sm, sn, parts.labels, C=est.C, p2p=est.p2p,
+                                 samples=est.samples, mesh=src)
+    a = np.asarray(sn.mass)
+    assert seg.labels.shape == (6000,)
+    assert np.sum(a * (seg.labels == truth)) / a.sum() > 0.85
+
+
+# refusals ----------------------------------------------------------------------------------
+
+def test_what_needs_triangles_refuses_with_one_line_naming_the_reason(sphere_mesh):
+    cloud = bsfjax.PointCloud(_sphere_points(300), name="scan.ply")
+    s = bsfjax.spectrum(cloud, 40)
+    with pytest.raises(bsfjax.BSFError,
+                       match=r"point cloud target needs landmarks: the landmark-free map's "
+                             r"orientation term needs triangles.*\(scan.ply\)"):
+        bsfjax.estimate_map(s, s, source_mesh=sphere_mesh, target_mesh=cloud)
+    with pytest.raises(bsfjax.BSFError, match=r"point cloud source needs landmarks"):
+        bsfjax.estimate_map(s, s, source_mesh=cloud, target_mesh=sphere_mesh)
+    with pytest.raises(bsfjax.BSFError, match="heat method"):
+        bsfjax.geodesic_distances(cloud, [0], method="heat")
+    with pytest.raises(bsfjax.BSFError, match="orientation agreement needs triangles"):
+        bsfjax.orientation_agreement(cloud, cloud, np.arange(300))
+    with pytest.raises(bsfjax.BSFError, match="per-triangle labels need a triangle source"):
+        bsfjax.transfer_face_labels(s, s, np.zeros(0, int), source_mesh=cloud, target_mesh=cloud,
+                                    p2p=np.arange(300), method="p2p")
+    with pytest.raises(bsfjax.BSFError, match="cannot be subdivided"):
+        bsfjax.internal.subdivide(cloud)
+    with pytest.raises(bsfjax.MeshError, match="at least 4 points"):
+        bsfjax.laplacian(bsfjax.PointCloud(np.eye(3)))
+
+
+# the command line --------------------------------------------------------------------------
+
+def test_cli_transfers_labels_to_a_point_cloud_in_file_order(tmp_path, capsys):
+    import meshio
+
+    pair = bsfjax.example_pair(levels=1)
+    bsfjax.save_mesh(tmp_path / "src.off", pair.source)
+    order = np.random.default_rng(0).permutation(pair.target.n_vertices)  # rows shuffled
+    pts = pair.target.vertices[order]
+    np.savetxt(tmp_path / "cloud.xyz", pts)
+    np.savetxt(tmp_path / "labels.txt", pair.labels, fmt="%d")
+    lm = example_landmarks(pair)
+    lm_cloud = np.argsort(order)[lm]
+    out, ply = tmp_path / "out.txt", tmp_path / "coloured.ply"
+    landmarks = f"{','.join(map(str, lm))}:{','.join(map(str, lm_cloud))}"
+    rc = main(["transfer", str(tmp_path / "src.off"), str(tmp_path / "cloud.xyz"), "--labels",
+               str(tmp_path / "labels.txt"), "--landmarks", landmarks, "-k", "20",
+               "--out", str(out), "--mesh-out", str(ply)])
+    assert rc == 0
+    got = np.loadtxt(out, dtype=int)
+    assert got.shape == (len(pts),) and np.mean(got == pair.labels[order]) > 0.8
+    written = meshio.read(ply)
+    assert len(written.cells) == 0 or all(len(c.data) == 0 for c in written.cells)
+    np.testing.assert_array_equal(written.points, pts)
+    np.testing.assert_array_equal(written.point_data["label"], got)
+    capsys.readouterr()
+    rc = main(["transfer", str(tmp_path / "src.off"), str(tmp_path / "cloud.xyz"), "--labels",
+               str(tmp_path / "labels.txt"), "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert rc != 0 and len(err.splitlines()) == 1
+    assert "point cloud target needs --landmarks" in err and "needs triangles" in err
