@@ -22,9 +22,11 @@ class CLIError(ValueError):
 def _read_array(path: str, what: str, dtype=None):
     import numpy as np
 
+    from .._util import input_problem
+
     p = Path(path)
-    if not p.exists():
-        raise CLIError(f"{what} file {p}: no such file")
+    if input_problem(p):
+        raise CLIError(f"{what} file {p}: {input_problem(p)}")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # loadtxt on an empty file
@@ -35,6 +37,9 @@ def _read_array(path: str, what: str, dtype=None):
         raise CLIError(f"{what} file {p}: no data")
     if not np.issubdtype(arr.dtype, np.number):
         raise CLIError(f"{what} file {p}: expected numbers, got dtype {arr.dtype}")
+    if np.iscomplexobj(arr):  # not cut to the real part
+        raise CLIError(f"{what} file {p}: expected real numbers, got complex values (dtype "
+                       f"{arr.dtype})")
     if dtype is int and not np.issubdtype(arr.dtype, np.integer):
         from .._util import non_integer_entry
 

@@ -56,7 +56,26 @@ def _use_compilation_cache() -> None:
     jax.config.update("jax_compilation_cache_dir", os.path.join(base, "bsfjax", "jax"))
 
 
+def _format_warning(message, category, filename, lineno, line=None) -> str:
+    """A warning of the command as one line, ``bsfjax: warning: …`` (not Python's
+    ``file:line: Category: …`` and source line, which mean nothing to a user of the command)."""
+    text = " ".join(str(message).split()) or category.__name__
+    return f"bsfjax: warning: {text}\n"
+
+
 def _main(argv: list[str] | None) -> int:
+    # the format only, while the command runs: a Python caller of main() that records
+    # warnings (catch_warnings(record=True), pytest.warns) still gets them, and its own
+    # format is back afterwards
+    previous = warnings.formatwarning
+    warnings.formatwarning = _format_warning
+    try:
+        return _run(argv)
+    finally:
+        warnings.formatwarning = previous
+
+
+def _run(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(_join_option_values(sys.argv[1:] if argv is None else argv))
     if getattr(args, "func", None) is None:

@@ -85,10 +85,17 @@ def _read_landmarks_file(path: str | None, targets: list[Path], error) -> dict[i
     out = {}
     by_name = {p.name: i for i, p in enumerate(targets)}
     by_stem = {p.stem: i for i, p in enumerate(targets)}
+    unmatched = [key for key in data if by_name.get(key, by_stem.get(key)) is None]
+    if unmatched:  # a typo or another run's targets: said, not silently dropped
+        import warnings
+
+        shown = ", ".join(repr(k) for k in unmatched[:5]) + (", …" if len(unmatched) > 5 else "")
+        warnings.warn(f"--landmarks-file {path}: {len(unmatched)} entries match no target of "
+                      f"this run (by file name or stem) and are not used: {shown}", stacklevel=2)
     for key, val in data.items():
         i = by_name.get(key, by_stem.get(key))
         if i is None:
-            continue  # landmarks of a target not in this run
+            continue  # landmarks of a target not in this run (warned above)
         ok = (isinstance(val, list) and len(val) == 2 and all(isinstance(v, list) for v in val)
               and len(val[0]) == len(val[1]) > 0
               and all(isinstance(x, int) and not isinstance(x, bool) for v in val for x in v))

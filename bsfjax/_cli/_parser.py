@@ -189,7 +189,7 @@ def _check_transfer_form(args) -> None:
 def _check_options(args) -> None:
     """Every integer option in range, every output path usable and distinct from the inputs,
     before any work (one line naming the option and the value as given)."""
-    from .._util import check_outputs
+    from .._util import check_outputs, input_problem
 
     for attr, opt, lo in _INT_OPTIONS:
         v = getattr(args, attr, None)
@@ -198,13 +198,19 @@ def _check_options(args) -> None:
     cmd = args.command
     if cmd == "transfer":
         _check_transfer_form(args)
+        t = args.threshold
+        if t is not None and not 0 <= t < 1:  # nan fails both comparisons
+            raise CLIError(f"--threshold must be a number in [0, 1), got {t!r}")
+        estimate = args.out_dir is not None or not args.map or args.map[0] == "estimate"
+        if estimate and args.k < 2:
+            raise CLIError(f"-k must be an integer >= 2 to estimate a map (--map estimate), "
+                           f"got {args.k}")
         if args.out_dir is not None:
             for opt, path in (("source", args.source), ("--labels", args.labels),
                               ("--function", args.function),
                               ("--landmarks-file", args.landmarks_file)):
-                if path is not None and not Path(path).is_file():
-                    raise CLIError(f"{opt} {path}: " + ("is a folder" if Path(path).is_dir()
-                                                         else "no such file"))
+                if path is not None and input_problem(path):
+                    raise CLIError(f"{opt} {path}: {input_problem(path)}")
             if args.truth_dir is not None and not Path(args.truth_dir).is_dir():
                 raise CLIError(f"--truth-dir {args.truth_dir}: no such folder")
             check_outputs({"--out-dir": args.out_dir, "--mesh-out-dir": args.mesh_out_dir},
@@ -216,9 +222,8 @@ def _check_options(args) -> None:
         for opt, path in (("source", args.source), ("target", args.target),
                           ("--labels", args.labels), ("--function", args.function),
                           ("--map", kind_file), ("--truth", args.truth)):
-            if path is not None and not Path(path).is_file():  # before the meshes are read
-                raise CLIError(f"{opt} {path}: " + ("is a folder" if Path(path).is_dir()
-                                                     else "no such file"))
+            if path is not None and input_problem(path):  # before the meshes are read
+                raise CLIError(f"{opt} {path}: {input_problem(path)}")
         check_outputs({"--out": args.out, "--mesh-out": args.mesh_out},
                       {"source": args.source, "target": args.target, "--labels": args.labels,
                        "--function": args.function, "--map": kind_file,

@@ -30,6 +30,7 @@ import numpy as np
 from .._util import BSFError
 from .._util import atomic_path, write_text_atomic
 from .._util import non_integer_entry
+from .._util import input_problem
 
 __all__ = ["LabelFile", "load_labels", "save_labels", "is_face_file", "UNASSIGNED_PART"]
 
@@ -72,8 +73,8 @@ def read_label_file(path, what: str) -> LabelFile:
     """[`load_labels`][bsfjax.load_labels], its messages naming the file as ``what`` (``bsfjax transfer``'s
     ``--truth`` files are read here too)."""
     path = Path(path)
-    if not path.is_file():
-        raise BSFError(f"{what} file {path}: no such file")
+    if input_problem(path):
+        raise BSFError(f"{what} file {path}: {input_problem(path)}")
     if path.suffix.lower() == ".json":
         return _load_json(path, what)
     try:
@@ -101,13 +102,30 @@ def _load_json(path: Path, what: str) -> LabelFile:
         parts = json.loads(path.read_text())
         if not isinstance(parts, dict):
             raise TypeError(f"the file holds a {type(parts).__name__}, not an object")
-        names = tuple(sorted(parts))
-        idx = [np.asarray(parts[n], dtype=np.int64).ravel() for n in names]
-    except (ValueError, TypeError, AttributeError, UnicodeDecodeError) as exc:
+    except (ValueError, TypeError, UnicodeDecodeError) as exc:
         raise BSFError(f"{what} file {path}: expected {{part name: [vertex indices]}} "
                        f"({exc})") from None
-    if not names or not any(i.size for i in idx) or any(i.size and i.min() < 0 for i in idx):
-        raise BSFError(f"{what} file {path}: no parts, no vertices, or negative vertex indices")
+    names = tuple(sorted(parts))
+    total = sum(len(v) for v in parts.values() if isinstance(v, list))
+    for name in names:  # every value checked in Python, before anything is allocated
+        val = parts[name]
+        if not isinstance(val, list):
+            raise BSFError(f"{what} file {path}: part {name!r} must be a list of vertex "
+                           f"indices, got {json.dumps(val)[:40]}")
+        for x in val:  # JSON true, 0.7 and "12" are not vertex indices
+            if type(x) is not int:
+                raise BSFError(f"{what} file {path}: part {name!r} has {json.dumps(x)[:40]}, "
+                               "not an integer vertex index")
+            if x < 0:
+                raise BSFError(f"{what} file {path}: part {name!r} has {x}: negative vertex "
+                               "indices are not vertices")
+            if x >= total:
+                raise BSFError(f"{what} file {path}: part {name!r} has vertex index {x}, but "
+                               f"the file lists only {total} indices: at least "
+                               f"{x + 1 - total} vertices are in no part")
+    if not total:
+        raise BSFError(f"{what} file {path}: no parts or no vertices")
+    idx = [np.asarray(parts[n], dtype=np.int64) for n in names]
     lab = np.full(1 + max(int(i.max()) for i in idx if i.size), -1, np.int64)
     for i in reversed(range(len(names))):  # reversed: the first name wins
         lab[idx[i]] = i

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .._util import MeshError
+from .._util import not_regular
 from ._clean import clean_mesh
 from ._mesh import Mesh, PointCloud
 
@@ -98,6 +99,7 @@ def _read_off(p: Path) -> tuple[np.ndarray, np.ndarray]:
     are checked against the file before anything is allocated.
     """
     raw = p.read_bytes()
+    raw = raw[3:] if raw.startswith(b"\xef\xbb\xbf") else raw  # a UTF-8 byte-order mark
     fast = _read_plain_off(raw)
     if fast is not None:
         return fast
@@ -215,21 +217,79 @@ def _check_ply(p: Path) -> None:
                         f"of data but only {body} follow: truncated?)")
 
 
+def _ply_face_alias(p: Path):
+    """``p``, or an in-memory copy whose face list ``vertex_index`` (the name some exporters
+    use) is renamed ``vertex_indices``, the only name meshio reads."""
+    import io
+
+    with open(p, "rb") as fh:
+        head = fh.read(1 << 20)
+    end = head.find(b"end_header")
+    alias = re.compile(rb"^(property\s+list\s+\S+\s+\S+\s+)vertex_index(\s*)$", re.M)
+    if end < 0 or not alias.search(head[:end]):
+        return p
+    data = p.read_bytes()
+    return io.BytesIO(alias.sub(rb"\1vertex_indices\2", data[:end]) + data[end:])
+
+
+def _read_obj(p: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """Positions and faces of an OBJ file by position index, texture (``vt``) and normal
+    (``vn``) indices ignored, or ``None`` when the file is not such an OBJ (meshio's message
+    then stands).  meshio refuses the most common textured exports: more ``vt`` than ``v``
+    (texture seams) or shared normals (``f a/b/c`` with fewer ``vn``)."""
+    try:
+        lines = p.read_text().splitlines()
+    except (OSError, UnicodeDecodeError):
+        return None
+    verts, polys = [], []
+    for ln in lines:
+        tok = ln.split("#", 1)[0].split()
+        if not tok:
+            continue
+        if tok[0] == "v":
+            if len(tok) < 4:
+                return None
+            try:
+                verts.append([float(t) for t in tok[1:4]])
+            except ValueError:
+                return None
+        elif tok[0] == "f":
+            try:  # 1-based, as meshio reads them (relative indices are not supported)
+                polys.append([int(t.split("/", 1)[0]) - 1 for t in tok[1:]])
+            except ValueError:
+                return None
+            if len(polys[-1]) < 3:
+                return None
+    if not verts or not polys:
+        return None
+    tris = [[q[0], q[j], q[j + 1]] for q in polys for j in range(1, len(q) - 1)]
+    try:
+        faces = np.asarray(tris, dtype=np.int64)
+    except OverflowError:
+        return None
+    return np.asarray(verts, np.float64), faces
+
+
 def _read_meshio(p: Path) -> tuple[np.ndarray, np.ndarray]:
     import contextlib
     import io
 
     import meshio
 
+    source = p
     if p.suffix.lower() == ".ply":
         _check_ply(p)
+        source = _ply_face_alias(p)
     # meshio prints to stdout and calls sys.exit() when no reader accepts a file: capture both
     try:
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()), \
                 warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # meshio's STL size probe overflows
-            m = meshio.read(p)
+            m = meshio.read(source, file_format=None if source is p else "ply")
     except (Exception, SystemExit) as exc:
+        obj = _read_obj(p) if p.suffix.lower() == ".obj" else None
+        if obj is not None:  # texture seams, shared normals: meshio wants one vt/vn per v
+            return obj
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         if isinstance(exc, SystemExit):
             msg = "unrecognized or malformed file"
@@ -299,6 +359,8 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
         raise MeshError(f"{p}: no such file")
     if p.is_dir():
         raise MeshError(f"{p}: is a directory, not a mesh file")
+    if not_regular(p):  # a FIFO would block the read
+        raise MeshError(f"{p}: is {not_regular(p)}, not a regular file")
     try:
         suffix = p.suffix.lower()
         if suffix == ".off":

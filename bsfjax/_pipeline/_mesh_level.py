@@ -21,7 +21,8 @@ from .._metrics import labels_to_indicators
 from .._sampling import farthest_point_sampling
 from .._spectral import Spectrum
 from .._util import on_one_blas_thread
-from .._util import check_indices, check_source_mesh, compact_labels
+from .._util import check_finite, check_indices, check_source_mesh, compact_labels
+from .._util import homogeneous, pow2_scale
 
 __all__ = ["transfer_values", "transfer_labels", "LabelTransfer", "REGIMES"]
 
@@ -54,9 +55,16 @@ def transfer_values(source: Spectrum, target: Spectrum,
       ``decode(transfer_frame(build_frame(source, centers), C, target), encode(...))``.
     - `samples`: ``(source, target)`` [`Subsample`][bsfjax.Subsample] s for ``"refined"`` (e.g.
       ``estimate_map(...).samples``); ignored by the other methods.
+
+    **Returns:**
+
+    The transferred values ``(m, n_N)`` (or ``(n_N,)``), in the engine's dtype (float32
+    unless ``jax_enable_x64``) where it holds them exactly, else in float64: values of any
+    float64 magnitude (1e300) are computed at unit scale on the host and scaled back in
+    float64, never returned as inf or NaN.  Complex values are refused.
     """
     method = as_method(method, **options)
-    f = np.asarray(values, dtype=float)
+    f = _real_array(values, "values")
     single = f.ndim == 1
     f = f[None] if single else f
     if f.ndim != 2 or f.shape[1] != source.n_vertices:
@@ -100,9 +108,41 @@ def transfer_values(source: Spectrum, target: Spectrum,
                 else np.asarray(centers), p2p=p2p,
                 distances=distances,
                 samples=samples if isinstance(method, RefinedPullBack) else None)
-    res = transfer(method, pair, f, k=k)
-    out = np.asarray(res.transferred)
+    check_finite(f, "values")
+    # per function, on the host in float64: the engine's own float32 restore would overflow
+    # for float64 values beyond float32 (1e39, 1e300); not for a method with a fixed scale
+    scale = pow2_scale(np.max(np.abs(f), axis=-1)) if homogeneous(method) else None
+    res = transfer(method, pair, f if scale is None else f / scale[:, None], k=k)
+    out = _host_restore(np.asarray(res.transferred), scale, values)
     return out[0] if single else out
+
+
+def _real_array(values, name: str) -> np.ndarray:
+    """``values`` as a float64 array; complex values are refused (not cut to the real part)."""
+    arr = np.asarray(values)
+    if np.iscomplexobj(arr):
+        raise BSFError(f"{name} must be real numbers, got dtype {arr.dtype}")
+    try:
+        return np.asarray(arr, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise BSFError(f"{name} must be an array of real numbers, got dtype {arr.dtype} "
+                       f"({exc})") from None
+
+
+def _host_restore(out: np.ndarray, scale, values) -> np.ndarray:
+    """``out · scale`` per function in float64: in ``out``'s dtype where that holds the result
+    exactly (every ordinary case: the scale is a power of two), else in float64; a result
+    beyond float64 is a `BSFError`."""
+    if scale is None:
+        return out
+    full = out.astype(np.float64) * scale[:, None]
+    if not np.isfinite(full).all():
+        top = float(np.max(np.abs(np.asarray(values, np.float64))))
+        raise BSFError(f"values up to {top:.3g} transfer to values beyond the float64 range "
+                       f"(max {np.finfo(np.float64).max:.3g}): rescale the values")
+    with np.errstate(over="ignore", under="ignore"):
+        cast = full.astype(out.dtype)
+    return cast if np.array_equal(cast.astype(np.float64), full) else full
 
 
 class LabelTransfer(NamedTuple):

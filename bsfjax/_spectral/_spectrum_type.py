@@ -31,7 +31,8 @@ class Spectrum(eqx.Module):
     ``vmap`` over shapes.
 
     Constructing a ``Spectrum`` from concrete arrays checks them ([`bsfjax.BSFError`][bsfjax.BSFError]):
-    matching shapes, real finite values, ``mass >= 0``; traced values are not checked.
+    matching shapes, real finite values, ``mass >= 0`` with a positive finite total;
+    traced values are not checked.
     """
 
     evals: np.ndarray
@@ -63,6 +64,16 @@ class Spectrum(eqx.Module):
         if neg:
             raise BSFError(f"Spectrum.mass (vertex areas) must be >= 0, found {neg} negative "
                            "entries")
+        # every later stage divides by the total area (unit-area rescaling, norms)
+        with np.errstate(over="ignore"):
+            total = np.sum(np.asarray(self.mass, np.float64), axis=-1)
+        bad = ~(np.isfinite(total) & (total > 0))
+        if np.any(bad):
+            i = int(np.flatnonzero(np.reshape(bad, -1))[0])
+            where = "" if np.ndim(total) == 0 else f" (spectrum {i} of the stack)"
+            raise BSFError(f"Spectrum.mass (vertex areas) must have a positive, finite total, "
+                           f"got {np.reshape(total, -1)[i]:.3g}{where}: every stage divides by "
+                           "the area")
 
     @property
     def k(self) -> int:

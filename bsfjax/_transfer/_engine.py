@@ -22,7 +22,7 @@ from jaxtyping import Array, ArrayLike, Float
 from .._util import pad_leading, shard_leading
 from .._util import BSFError
 from .._frame import DENSE_BUDGET_BYTES
-from .._util import check_finite, homogeneous, restore_scale, unit_scale
+from .._util import check_finite, homogeneous, is_traced, restore_scale, unit_scale
 from ._methods import AbstractMethod, Pair, as_method, method_name
 from .._spectral import Spectrum, map_to_unit_area, unit_area, unit_area_pair
 from .._util import on_one_blas_thread
@@ -172,7 +172,7 @@ def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pai
     if not batched and method.frame_entries(pair) * itemsize > DENSE_BUDGET_BYTES:
         # a dense frame would not fit: run eagerly, so that build_frame / transfer_frame make
         # per-vertex-list frames (SparseFrame) and encode / decode use them
-        return _rescaled(TransferResult(*_kernel(method, pair, F, k, kt, batched)), scale)
+        return _rescaled(TransferResult(*_kernel(method, pair, F, k, kt, batched)), scale, f)
     if batched and jax.device_count() > 1:
         # pairs are independent: GSPMD splits the vmapped kernel without communication, each
         # device computing whole pairs (identical results); padding repeats the last pair
@@ -180,8 +180,8 @@ def transfer(method: AbstractMethod | str, pair: Pair, f: Float[ArrayLike, "*pai
         pair, F = jax.tree.map(lambda x: shard_leading(pad_leading(x, d, "edge"), "pairs"),
                                (pair, F))
         out = _run(method, pair, F, k, kt, batched)
-        return _rescaled(TransferResult(*jax.tree.map(lambda x: x[:P], out)), scale)
-    return _rescaled(TransferResult(*_run(method, pair, F, k, kt, batched)), scale)
+        return _rescaled(TransferResult(*jax.tree.map(lambda x: x[:P], out)), scale, f)
+    return _rescaled(TransferResult(*_run(method, pair, F, k, kt, batched)), scale, f)
 
 
 def _unit_area_pair(method: AbstractMethod, pair: Pair) -> Pair:
@@ -207,9 +207,23 @@ def _unit_area_pair(method: AbstractMethod, pair: Pair) -> Pair:
                 p2p=pair.p2p, centers=pair.centers, distances=dist, samples=pair.samples)
 
 
-def _rescaled(res: TransferResult, scale) -> TransferResult:
-    """Every output of a method is linear in ``f``: undo `unit_scale` per function."""
-    return TransferResult(*(restore_scale(x, scale) for x in res))
+def _rescaled(res: TransferResult, scale, f) -> TransferResult:
+    """Every output of a method is linear in ``f``: undo `unit_scale` per function.  With
+    concrete ``f`` (finite: checked), a result that does not fit the dtype (float64 values
+    beyond float32's range) is a `BSFError` naming the range, never an inf or NaN returned."""
+    with np.errstate(over="ignore"):  # a scale beyond the dtype: refused below, not warned
+        res = TransferResult(*(restore_scale(x, scale) for x in res))
+    if is_traced(f):
+        return res
+    leaves = [x for x in jax.tree.leaves(res) if jnp.issubdtype(jnp.result_type(x), jnp.floating)]
+    if all(bool(jnp.isfinite(x).all()) for x in leaves):
+        return res
+    dtype = jnp.result_type(leaves[0])
+    top = float(np.max(np.abs(np.asarray(f, np.float64))))
+    raise BSFError(f"f has values up to {top:.3g}: the results do not fit in {dtype} (max "
+                   f"{float(jnp.finfo(dtype).max):.3g}); rescale f, enable jax_enable_x64, or use "
+                   "transfer_values, which rescales on the host and returns float64 beyond the "
+                   "float32 range")
 
 
 def stack_pairs(pairs: Sequence[Pair]) -> Pair:

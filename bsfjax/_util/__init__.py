@@ -15,8 +15,8 @@ install_sigint_handler()
 from ._buckets import BUCKET_FACTORS, MERGE_PADDING, merge_buckets, size_bucket
 from ._devices import map_over_devices, n_devices, pad_leading, shard_leading
 from ._errors import BSFError, MeshError
-from ._files import (atomic_path, check_outputs, check_path_clashes, output_transaction,
-                     write_text_atomic)
+from ._files import (atomic_path, check_outputs, check_path_clashes, input_problem,
+                     not_regular, output_transaction, write_text_atomic)
 from ._memory import available_memory, format_bytes, release_free_memory
 from ._threads import eigensolve_on_one_thread, on_one_blas_thread, one_blas_thread
 from ._version import VERSION
@@ -34,5 +34,6 @@ __all__ = [
     "install_sigint_handler", "is_cli_process", "is_traced", "magnitude_limit",
     "map_over_devices", "merge_buckets", "n_devices", "non_integer_entry", "on_one_blas_thread",
     "one_blas_thread", "output_transaction", "pad_leading", "pow2_scale", "release_free_memory",
-    "require_triangles", "restore_scale", "shard_leading", "size_bucket", "unit_scale", "write_text_atomic",
+    "require_triangles", "restore_scale", "shard_leading", "size_bucket", "unit_scale",
+    "write_text_atomic", "input_problem", "not_regular",
 ]

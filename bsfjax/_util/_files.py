@@ -184,6 +184,38 @@ def write_text_atomic(path: str | os.PathLike, text: str, *, immediate: bool = F
     write_bytes_atomic(path, text.encode("utf-8"), immediate=immediate)
 
 
+def not_regular(path: str | os.PathLike) -> str | None:
+    """What an existing input path that is neither a regular file nor a folder is (``"a named
+    pipe (FIFO)"``, ``"a socket"``, ``"a character device"``, ``"a block device"``), or ``None``.
+    Reading such a path would block (a FIFO without a writer) or never end, so readers refuse
+    it by name instead of calling it a missing file."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    for test, what in ((stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISSOCK, "a socket"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device")):
+        if test(mode):
+            return what
+    return "a special file"
+
+
+def input_problem(path: str | os.PathLike) -> str | None:
+    """Why ``path`` cannot be read as an input file (``"no such file"``, ``"is a folder"``,
+    ``"is a named pipe (FIFO), not a regular file"``, …), or ``None`` for a regular file."""
+    p = Path(path)
+    if p.is_file():
+        return None
+    if p.is_dir():
+        return "is a folder"
+    kind = not_regular(p)
+    return f"is {kind}, not a regular file" if kind else "no such file"
+
+
 def _same(a: Path, b: Path) -> bool:
     try:
         return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
