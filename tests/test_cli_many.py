@@ -191,7 +191,7 @@ def test_cluster_detection_and_flags(monkeypatch):
 
     import jax
 
-    from bsfjax._cli._many import _initialize_distributed
+    from bsfjax._cli._distributed import _initialize_distributed
     from bsfjax.internal import CLIError
 
     calls = []

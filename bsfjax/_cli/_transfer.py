@@ -47,7 +47,7 @@ def _cmd_transfer(args) -> int:
         if args.truth_dir is not None and not args.labels:
             raise CLIError("--truth-dir compares labels: use it with --labels")
         return cmd_transfer_many(args, CLIError)
-    from ._many import check_backend
+    from ._distributed import check_backend
 
     check_backend(CLIError)
     return _transfer_one(args)
