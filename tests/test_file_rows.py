@@ -243,3 +243,24 @@ def test_mesh_helpers_go_back_and_forth(tmp_path):
     plain = bsfjax.Mesh(v[1:4], [[0, 1, 2]])
     assert plain.file_mesh() is plain and plain.dropped_rows == 0
     np.testing.assert_array_equal(plain.to_file_rows([1, 2, 3]), [1, 2, 3])
+
+
+def test_spectrum_command_keeps_file_rows(base, tmp_path):
+    """``bsfjax spectrum``: one eigenvector row per file row (NaN and zero mass where the
+    reader dropped an unreferenced vertex), the kept rows those of the mesh without them."""
+    d, pair, _, _ = base
+    v, f, rows = _with_extra_rows(pair.source, [0, 100, pair.source.n_vertices])
+    _write_off(tmp_path / "m.off", v, f)
+    assert main(["spectrum", str(d / "src.off"), "-k", "6", "--out", str(tmp_path / "a.npz")]) == 0
+    with pytest.warns(UserWarning):
+        assert main(["spectrum", str(tmp_path / "m.off"), "-k", "6",
+                     "--out", str(tmp_path / "b.npz")]) == 0
+    a, b = np.load(tmp_path / "a.npz"), np.load(tmp_path / "b.npz")
+    assert b["evecs"].shape == (len(v), 6) and b["mass"].shape == (len(v),)
+    dropped = np.setdiff1d(np.arange(len(v)), rows)
+    assert np.isnan(b["evecs"][dropped]).all() and (b["mass"][dropped] == 0).all()
+    np.testing.assert_allclose(b["evals"], a["evals"], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(b["mass"][rows], a["mass"], rtol=1e-12)
+    # eigenvectors up to sign
+    sign = np.sign(np.sum(b["evecs"][rows] * a["evecs"], axis=0))
+    np.testing.assert_allclose(b["evecs"][rows] * sign, a["evecs"], atol=1e-6)

@@ -63,8 +63,14 @@ def _cmd_spectrum(args) -> int:
         raise CLIError(f"--out {args.out}: use a .npz file name")
     mesh = load_mesh(args.mesh)
     spec = spectrum(mesh, args.k, method=args.method)
+    # one row per row of the mesh file: NaN eigenvector rows and zero mass where the reader
+    # dropped a row (an unreferenced vertex), so the rows never shift
+    evecs = mesh.to_file_rows(np.asarray(spec.evecs))
+    mass = mesh.to_file_rows(np.asarray(spec.mass), fill=0.0)
     with atomic_path(args.out) as tmp, open(tmp, "wb") as fh:  # a handle: savez adds no suffix
-        np.savez(fh, evals=spec.evals, evecs=spec.evecs, mass=spec.mass)
+        np.savez(fh, evals=spec.evals, evecs=evecs, mass=mass)
+    dropped = mesh.dropped_rows
     print(f"{args.mesh}: {mesh.n_vertices} vertices, k={args.k}, method={args.method}, "
-          f"lambda_2={spec.evals[1] if spec.k > 1 else 0:.6g}, wrote {args.out}")
+          f"lambda_2={spec.evals[1] if spec.k > 1 else 0:.6g}, wrote {args.out}"
+          + (f" ({dropped} file rows without a surface: NaN rows, zero mass)" if dropped else ""))
     return 0

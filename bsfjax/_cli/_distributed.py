@@ -11,7 +11,7 @@ import sys
 #: detects by itself: (variable holding the process count, launcher).
 _CLUSTER_SIZE_VARS = (("SLURM_NTASKS", "SLURM"), ("OMPI_COMM_WORLD_SIZE", "Open MPI"))
 #: Seconds ``jax.distributed`` may take to start (``--timeout``): JAX's own default is 300.
-DEFAULT_TIMEOUT = 120
+DEFAULT_TIMEOUT = 90
 
 
 def check_coordinator(text: str, error) -> tuple[str, int]:

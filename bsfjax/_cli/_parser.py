@@ -92,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--num-processes", type=int, help="number of processes (jax.distributed)")
     p.add_argument("--process-id", type=int, help="this process's rank in [0, N)")
     p.add_argument("--timeout", type=int, default=None, help="seconds jax.distributed may take "
-                   "to start (default 120): an unreachable coordinator or a missing process is "
+                   "to start (default 90): an unreachable coordinator or a missing process is "
                    "then one error line")
     p.set_defaults(func=_cmd_transfer)
 
