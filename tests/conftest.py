@@ -12,17 +12,28 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def pytest_configure(config):
-    """One persistent JAX compilation cache for the whole run (set before xdist starts its
-    workers, so they, the notebook kernels and the CLI subprocesses share it), outside the
-    user's own cache folder."""
+    """One persistent JAX compilation cache for the whole run, new for each run (set before
+    xdist starts its workers, so they, the notebook kernels and the CLI subprocesses share it),
+    outside the user's own cache folder: a cache left by an earlier run, or one that a killed
+    run wrote half of, is never read."""
     import os
     import tempfile
 
-    folder = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR",
-                                   os.path.join(tempfile.gettempdir(), "bsfjax-tests-jax-cache"))
+    if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+        folder = tempfile.mkdtemp(prefix="bsfjax-tests-jax-cache-")
+        os.environ["JAX_COMPILATION_CACHE_DIR"] = folder
+        config._bsfjax_cache = folder  # this process made it: it removes it at the end
     import jax
 
-    jax.config.update("jax_compilation_cache_dir", folder)
+    jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+
+
+def pytest_unconfigure(config):
+    import shutil
+
+    folder = getattr(config, "_bsfjax_cache", None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def data_path(*parts: str) -> Path:
