@@ -209,7 +209,7 @@ def test_cluster_detection_and_flags(monkeypatch):
     monkeypatch.delenv("SLURM_NTASKS")
     monkeypatch.setenv("OMPI_COMM_WORLD_SIZE", "2")
     _initialize_distributed(args, CLIError)
-    assert calls == [{"initialization_timeout": 120}] * 2  # --timeout's default
+    assert calls == [{"initialization_timeout": 90}] * 2  # --timeout's default
     args = argparse.Namespace(coordinator="h:1", num_processes=3, process_id=2, timeout=7)
     _initialize_distributed(args, CLIError)
     assert calls[-1] == dict(coordinator_address="h:1", num_processes=3, process_id=2,
