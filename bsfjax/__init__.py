@@ -15,7 +15,7 @@ from ._util import BSFError, MeshError, VERSION
 # mesh
 from ._mesh import (
     ExamplePair, FileRows, LabelFile, Mesh, MeshReport, PointCloud, example_mesh, example_pair,
-    load_labels, load_mesh, mesh_report, save_labels, save_mesh,
+    MainBody, load_labels, load_mesh, mesh_report, save_labels, save_mesh, split_main_body,
 )
 
 # operators and spectrum
@@ -64,6 +64,7 @@ __all__ = [
     "BSFError", "MeshError",
     # mesh
     "Mesh", "FileRows", "MeshReport", "PointCloud", "load_mesh", "mesh_report", "save_mesh",
+    "MainBody", "split_main_body",
     "ExamplePair",
     "example_mesh", "example_pair",
     # operators and spectrum

@@ -320,6 +320,12 @@ def _write_target(args, run: _Run, i: int, res, part_names, per_face: bool, erro
            "seconds": round(res.seconds, 4)}
     if per_face:
         rec["dropped_triangles"] = target.dropped_faces
+    parts = res.main_body  # other components: labelled from the main body's nearest surface
+    rec.update(other_components=0 if parts is None else parts.n_other_components,
+               other_component_vertices=0 if parts is None else int(parts.other.size),
+               unassigned_fragment_vertices=0 if parts is None else parts.n_unassigned)
+    if parts is not None:
+        tqdm.write(f"bsfjax transfer: {path}: {parts.summary()}", file=sys.stderr)
     if res.turn_doubtful is not None:
         rec["turn_doubtful"] = res.turn_doubtful
         if res.turn_doubtful:

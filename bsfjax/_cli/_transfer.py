@@ -57,8 +57,7 @@ def _transfer_one(args) -> int:
     import numpy as np
 
     from .._pipeline import transfer_labels, transfer_values
-    from .._mesh import load_mesh
-    from .._mesh import save_mesh
+    from .._mesh import load_mesh, save_mesh, split_main_body
     from .._spectral import spectrum
 
     if Path(args.out).suffix not in (".npy", ".txt") and not (
@@ -73,7 +72,14 @@ def _transfer_one(args) -> int:
     if kind not in ("estimate", "p2p", "fmap") or (kind == "estimate") != (len(rest) == 0) or len(rest) > 1:
         raise CLIError("--map must be 'estimate', 'p2p FILE' or 'fmap FILE'")
     landmarks = _parse_landmarks(args.landmarks)
-    source, target = load_mesh(args.source), load_mesh(args.target)
+    # a scan in pieces: matched through its main body (one zero eigenvalue); the vertices of
+    # its other components are labelled from the nearest main-body vertex at the end
+    src_parts = split_main_body(load_mesh(args.source))
+    parts = split_main_body(load_mesh(args.target))
+    source, target = src_parts.mesh, parts.mesh
+    if src_parts.n_other_components:  # their labels are not carried
+        print(f"source: {src_parts.other.size} vertices in {src_parts.n_other_components} other "
+              "components left out (its main body is matched)", file=sys.stderr)
     for shape, role in ((source, "source"), (target, "target")):
         if shape.is_point_cloud and kind == "estimate" and landmarks is None:
             raise CLIError(f"{shape.name}: a point cloud {role} needs --landmarks: the "
@@ -162,6 +168,7 @@ def _transfer_one(args) -> int:
             if est.turn_doubtful:
                 warnings.warn(TURN_DOUBT, stacklevel=1)
     common = dict(C=C, p2p=p2p, method=args.method, mesh=source)
+    on_whole = False  # the result on the whole target (main body and other components)
     if args.method == "refined":  # its continuation runs on the samples of the map's ZoomOut
         from .._sampling import subsample
 
@@ -190,6 +197,14 @@ def _transfer_one(args) -> int:
                   file=sys.stderr)
         if truth is not None:
             area = target.face_areas() if per_face else np.asarray(sn.mass)
+            if parts.n_other_components:  # over the whole target: its other components too
+                from .._mesh import vertex_areas
+
+                whole, on_whole = parts.whole, True
+                result, truth = (parts.to_whole(result, faces=per_face),
+                                 whole.from_file_rows(target.to_file_rows(truth, faces=per_face),
+                                                      faces=per_face))
+                area = whole.face_areas() if per_face else vertex_areas(whole)
             correct = result == truth
             print(f"accuracy against {args.truth}: {np.sum(area * correct) / np.sum(area):.1%} of "
                   f"the target area ({np.mean(correct):.1%} of its "
@@ -198,6 +213,11 @@ def _transfer_one(args) -> int:
         result = transfer_values(sm, sn, values, **common)
         result = result.T if result.ndim == 2 else result
     # every file written has the target file's rows: -1 / NaN where the reader dropped one
+    if parts.n_other_components:
+        if not on_whole:  # (already there for the accuracy)
+            result = parts.to_whole(result, faces=per_face)
+        print(parts.summary(), file=sys.stderr)
+    target = parts.whole
     result = target.to_file_rows(result, faces=per_face)
     if args.mesh_out:
         coloured = coloured_data(result, bool(args.labels))

@@ -11,14 +11,15 @@ from ._label_files import LabelFile, is_face_file, load_labels, read_label_file,
 from ._clean import MeshReport, clean_mesh, mesh_report
 from ._graph import edge_graph, graph_from_edges, knn_edges, mesh_edges, n_components
 from ._points import sample_surface
+from ._components import MainBody, split_main_body, vertex_areas
 from ._mesh import FileRows, Mesh, PointCloud
 from ._readers import load_mesh
 from ._mesh_write import save_mesh
 from ._subdivision import subdivide
 
 __all__ = [
-    "ExamplePair", "FileRows", "JOINTS", "LABEL_NAMES", "LabelFile", "Mesh", "MeshReport", "POSES",
+    "ExamplePair", "FileRows", "JOINTS", "LABEL_NAMES", "LabelFile", "MainBody", "Mesh", "MeshReport", "POSES",
     "PointCloud", "clean_mesh", "edge_graph", "example_mesh", "example_pair", "graph_from_edges",
     "is_face_file", "knn_edges", "load_labels", "load_mesh", "mesh_edges", "mesh_report",
-    "n_components", "read_label_file", "sample_surface", "save_labels", "save_mesh", "subdivide",
+    "n_components", "read_label_file", "sample_surface", "save_labels", "save_mesh", "split_main_body", "subdivide", "vertex_areas",
 ]

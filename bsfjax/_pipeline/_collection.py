@@ -54,9 +54,10 @@ from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
 from .._maps import MapEstimator, check_starts
 from ._face_labels import decide_face_labels, face_label_shares
-from ._collection_rows import collection_estimator, file_row_results, landmark_lookup, source_values
+from ._collection_rows import (collection_estimator, file_row_results, landmark_lookup, on_body,
+                               source_values, whole_result)
 from .._metrics import labels_to_indicators
-from .._mesh import Mesh, load_mesh
+from .._mesh import MainBody, Mesh, load_mesh, split_main_body
 from .._transfer import BSF, GeodesicBalls, SaturatedHeat, as_method, method_name
 from .._maps import REFINE_EIGENPAIRS
 from .._sampling import Subsample, subsample
@@ -99,6 +100,9 @@ class TargetTransfer(NamedTuple):
     #: the target [`Mesh`][bsfjax.Mesh] as read: ``mesh.to_file_rows(labels)`` numbers a result
     #: by the rows of its file (what ``file_rows=True`` returns)
     mesh: Mesh | None = None
+    #: the target's split ([`bsfjax.split_main_body`][bsfjax.split_main_body]): its main body
+    #: was matched, its other components labelled from the nearest surface
+    main_body: MainBody | None = None
 
 
 # --------------------------------------------------------------------------- host side
@@ -114,6 +118,7 @@ class _Target(NamedTuple):
     seconds: float
     p2p: np.ndarray | None = None  # without landmarks: the estimator's, chosen among starts
     turn_doubtful: bool | None = None  # and its MapEstimate.turn_doubtful
+    parts: MainBody | None = None  # the whole target: `mesh` is its main body
 
 
 def _as_mesh(target) -> Mesh:
@@ -290,9 +295,10 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     if method_name(method) == "std2":
         raise BSFError("method 'std2' needs a 2k x 2k map: not supported by transfer_collection")
     capped_batch(batch, check_int(k, "k", 2))  # (the dense systems: before any work)
-    source = _as_mesh(source)
-    n_m = source.n_vertices
-    vals = source_values(source, values, faces, labels, file_rows)
+    src_parts = split_main_body(_as_mesh(source))  # a scan in pieces: its main body is matched
+    vals = on_body(src_parts, source_values(src_parts.whole, values, faces, labels, file_rows),
+                   faces)
+    source, n_m = src_parts.mesh, src_parts.mesh.n_vertices
     if faces:
         if not labels:
             raise BSFError("faces=True carries labels of triangles: labels must be True")
@@ -340,7 +346,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         rep["zo_indices"] = sub_m.indices
         rep["zo_cells"] = sub_m.cells
         zo_chunk = default_chunk(sub_m.indices.size)
-    lm_of = landmark_lookup(landmarks, source, file_rows)
+    lm_of = landmark_lookup(landmarks, src_parts.whole, file_rows)  # (of the whole meshes)
     # one start, the batched stages' own: (k, wks_variance) with the orientation term
     single = (k, estimator.wks_variance)
     one_start = check_starts(estimator.starts, k_map, (single,),
@@ -356,10 +362,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     def prepare(i, mesh: Mesh, t: float) -> _Target:
         """Target ``i``'s host work (``t``: when its reading began)."""
+        lm, parts = lm_of(i, mesh), split_main_body(mesh)  # matched: the main body alone
+        lm, mesh = (None if lm is None else (src_parts.index(lm[0], "source landmarks"),
+                                             parts.index(lm[1], "target landmarks"))), parts.mesh
         if mesh.n_vertices <= k_spec:
             raise BSFError(f"{mesh.name or f'target {i}'}: {mesh.n_vertices} vertices, too few "
                            f"for {k_spec} eigenpairs")
-        lm = lm_of(i, mesh)
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
@@ -370,7 +378,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                             source_symmetry=source_symmetry())
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
-                       None if est is None else est.turn_doubtful)
+                       None if est is None else est.turn_doubtful, parts)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -436,7 +444,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 map_energy=float(o["energy"]), unassigned_share=share_un,
                 agreement=agree, confidence=conf, regime=regime, n_vertices=n, mass=mass,
                 seconds=tg.seconds + share, turn_doubtful=tg.turn_doubtful, mesh=tg.mesh)
-            yield tg.index, file_row_results(res, source, faces) if file_rows else res
+            res = whole_result(res, tg.parts, src_parts, faces)  # (other components: nearest)
+            yield tg.index, file_row_results(res, src_parts.whole, faces) if file_rows else res
 
     targets = list(targets)
     share = process_share(range(len(targets)))

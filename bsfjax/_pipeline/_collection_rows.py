@@ -14,7 +14,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .._maps import MapEstimator, check_landmark_pairs
-from .._mesh import Mesh
+from .._mesh import MainBody, Mesh, vertex_areas
 from .._util import BSFError
 
 _DEFAULT = MapEstimator()
@@ -83,9 +83,37 @@ def file_row_results(res, source: Mesh, faces: bool):
     mesh = res.mesh
     rows_m = source.vertex_ids if source.vertex_ids is not None else np.arange(source.n_vertices)
     labels = None if res.labels is None else mesh.to_file_rows(res.labels, faces=faces)
+    p2p = np.where(res.p2p >= 0, rows_m[res.p2p], -1)  # (-1: a fragment far from the body)
     return res._replace(labels=labels, values=mesh.to_file_rows(res.values.T).T,
-                        p2p=mesh.to_file_rows(rows_m[res.p2p]),
+                        p2p=mesh.to_file_rows(p2p),
                         mass=mesh.to_file_rows(res.mass, 0.0))
 
 
-__all__ = ["collection_estimator", "file_row_results", "landmark_lookup", "source_values"]
+def on_body(parts: MainBody, vals: np.ndarray, faces: bool) -> np.ndarray:
+    """The source's values (last axis: its vertices or triangles) on its main body."""
+    if not parts.n_other_components:
+        return vals
+    return vals[..., parts.faces if faces else parts.vertices]
+
+
+def whole_result(res, parts: MainBody, src_parts: MainBody, faces: bool):
+    """A [`TargetTransfer`][bsfjax.TargetTransfer] of a target's main body on the whole target
+    and numbered by the whole source's vertices: the other components' vertices (triangles)
+    take the labels, values and point map of the nearest main-body vertex (triangle) within
+    ``parts.reach``, else ``-1`` / NaN; their mass is their barycentric area (at the scale of
+    the main body's)."""
+    p2p = res.p2p if not src_parts.n_other_components else src_parts.vertices[res.p2p]
+    if not parts.n_other_components:
+        return res._replace(p2p=p2p)
+    whole = parts.whole
+    mass = parts.to_whole(res.mass)
+    scale = float(np.sum(res.mass)) / parts.mesh.area
+    mass[parts.other] = vertex_areas(whole)[parts.other] * scale
+    labels = None if res.labels is None else parts.to_whole(res.labels, faces=faces)
+    return res._replace(labels=labels, values=parts.to_whole(res.values.T).T,
+                        p2p=parts.to_whole(p2p), mass=mass, n_vertices=whole.n_vertices,
+                        mesh=whole, main_body=parts)
+
+
+__all__ = ["collection_estimator", "file_row_results", "landmark_lookup", "on_body",
+           "source_values", "whole_result"]
