@@ -14,8 +14,9 @@ from ._util import BSFError, MeshError, VERSION
 
 # mesh
 from ._mesh import (
-    ExamplePair, FileRows, LabelFile, Mesh, MeshReport, PointCloud, example_mesh, example_pair,
-    load_labels, load_mesh, mesh_report, save_labels, save_mesh,
+    ExamplePair, FileRows, LabelFile, Mesh, MeshReport, PointCloud, denoise, denoise_iterations,
+    example_mesh, example_pair, load_labels, load_mesh, mesh_report, noise_level, save_labels,
+    save_mesh,
 )
 
 # operators and spectrum
@@ -64,6 +65,7 @@ __all__ = [
     "BSFError", "MeshError",
     # mesh
     "Mesh", "FileRows", "MeshReport", "PointCloud", "load_mesh", "mesh_report", "save_mesh",
+    "denoise", "denoise_iterations", "noise_level",
     "ExamplePair",
     "example_mesh", "example_pair",
     # operators and spectrum

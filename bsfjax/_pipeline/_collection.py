@@ -56,7 +56,7 @@ from .._maps import MapEstimator, check_starts
 from ._face_labels import decide_face_labels, face_label_shares
 from ._collection_rows import collection_estimator, file_row_results, landmark_lookup, source_values
 from .._metrics import labels_to_indicators
-from .._mesh import Mesh, load_mesh
+from .._mesh import Mesh, as_strength, denoise as denoise_mesh, denoise_iterations, load_mesh
 from .._transfer import BSF, GeodesicBalls, SaturatedHeat, as_method, method_name
 from .._maps import REFINE_EIGENPAIRS
 from .._sampling import Subsample, subsample
@@ -99,6 +99,8 @@ class TargetTransfer(NamedTuple):
     #: the target [`Mesh`][bsfjax.Mesh] as read: ``mesh.to_file_rows(labels)`` numbers a result
     #: by the rows of its file (what ``file_rows=True`` returns)
     mesh: Mesh | None = None
+    #: the Taubin iterations of [`bsfjax.denoise`][bsfjax.denoise] on this target (0: none)
+    denoise_iterations: int = 0
 
 
 # --------------------------------------------------------------------------- host side
@@ -114,6 +116,8 @@ class _Target(NamedTuple):
     seconds: float
     p2p: np.ndarray | None = None  # without landmarks: the estimator's, chosen among starts
     turn_doubtful: bool | None = None  # and its MapEstimate.turn_doubtful
+    original: Mesh | None = None  # the mesh as read, when `mesh` is its denoised geometry
+    denoised: int = 0  # the Taubin iterations of that
 
 
 def _as_mesh(target) -> Mesh:
@@ -219,7 +223,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                         spectrum_cache: str | None = None,
                         errors: str = "raise", batch: int = 1, starts=None,
                         faces: bool = False, file_rows: bool = False,
-                        estimator: MapEstimator | None = None) -> Iterator[tuple[int, TargetTransfer | Exception]]:
+                        estimator: MapEstimator | None = None,
+                        denoise: bool | int | str = True) -> Iterator[tuple[int, TargetTransfer | Exception]]:
     """Transfer one segmentation (or functions) from ``source`` to every mesh of ``targets``.
 
     Yields ``(index, result)`` as batches finish (grouped by size bucket, so not in order);
@@ -265,6 +270,11 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
       holds ``n_energies``, ``zoomout_samples`` and ``starts``: leave those arguments out.
       The batched stages follow its ``wks_variance``, ``orient_weight`` and
       ``zoomout_step``, the targets without landmarks (several starts) all of it.
+    - `denoise`: ``True`` (default) computes the source's and every target's spectrum, map
+      and transfer on [`bsfjax.denoise`][bsfjax.denoise]'s geometry with the strength chosen
+      from each mesh (none on a clean mesh); the labels are on the original vertices, and
+      each result's ``denoise_iterations`` and ``mesh`` (as read) say what was done.
+      ``False``: the meshes as given; an integer: that many Taubin iterations on every mesh.
     - `pad`: pad vertex and face counts to `size_bucket` sizes, merged for a
       collection of at most 64 targets (module doc; ``False``: one compilation per distinct
       count).
@@ -290,7 +300,9 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     if method_name(method) == "std2":
         raise BSFError("method 'std2' needs a 2k x 2k map: not supported by transfer_collection")
     capped_batch(batch, check_int(k, "k", 2))  # (the dense systems: before any work)
+    strength = as_strength(denoise)
     source = _as_mesh(source)
+    source = denoise_mesh(source, denoise_iterations(source, strength))
     n_m = source.n_vertices
     vals = source_values(source, values, faces, labels, file_rows)
     if faces:
@@ -360,6 +372,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             raise BSFError(f"{mesh.name or f'target {i}'}: {mesh.n_vertices} vertices, too few "
                            f"for {k_spec} eigenpairs")
         lm = lm_of(i, mesh)
+        original, n_it = mesh, denoise_iterations(mesh, strength)
+        mesh = denoise_mesh(mesh, n_it)
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
@@ -370,7 +384,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                             source_symmetry=source_symmetry())
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
-                       None if est is None else est.turn_doubtful)
+                       None if est is None else est.turn_doubtful, original, n_it)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -435,7 +449,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 C=map_to_unit_area(o["C"].astype(np.float64), *tg.factors, inverse=True),
                 map_energy=float(o["energy"]), unassigned_share=share_un,
                 agreement=agree, confidence=conf, regime=regime, n_vertices=n, mass=mass,
-                seconds=tg.seconds + share, turn_doubtful=tg.turn_doubtful, mesh=tg.mesh)
+                seconds=tg.seconds + share, turn_doubtful=tg.turn_doubtful, mesh=tg.original,
+                denoise_iterations=tg.denoised)
             yield tg.index, file_row_results(res, source, faces) if file_rows else res
 
     targets = list(targets)
