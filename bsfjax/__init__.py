@@ -14,8 +14,9 @@ from ._util import BSFError, MeshError, VERSION
 
 # mesh
 from ._mesh import (
-    ExamplePair, FileRows, LabelFile, Mesh, MeshReport, PointCloud, example_mesh, example_pair,
-    MainBody, load_labels, load_mesh, mesh_report, save_labels, save_mesh, split_main_body,
+    ExamplePair, FileRows, LabelFile, MainBody, Mesh, MeshReport, PointCloud, denoise,
+    denoise_iterations, example_mesh, example_pair, load_labels, load_mesh, mesh_report,
+    noise_level, save_labels, save_mesh, split_main_body,
 )
 
 # operators and spectrum
@@ -65,6 +66,7 @@ __all__ = [
     # mesh
     "Mesh", "FileRows", "MeshReport", "PointCloud", "load_mesh", "mesh_report", "save_mesh",
     "MainBody", "split_main_body",
+    "denoise", "denoise_iterations", "noise_level",
     "ExamplePair",
     "example_mesh", "example_pair",
     # operators and spectrum

@@ -133,7 +133,7 @@ class _Run:
                        "threshold": args.threshold, "one_start": bool(args.one_start),
                        "kind": "labels" if args.labels is not None else "function",
                        "output": suffix, "source": _sha256(args.source),
-                       "values": _sha256(values)}
+                       "values": _sha256(values), "denoise": not args.no_denoise}
 
     def outputs(self, p: Path) -> list[Path]:
         out = [self.out_dir / f"{p.stem}{self.suffix}"]
@@ -269,7 +269,14 @@ def cmd_transfer_many(args, error) -> int:
         method=args.method, k=args.k,
         landmarks=lambda j: landmarks.get(todo[j]), threshold=args.threshold,
         errors="report", spectrum_cache=args.spectrum_cache, file_rows=True,
-        batch=1 if args.batch is None else args.batch, estimator=map_estimator(args, args.k))
+        batch=1 if args.batch is None else args.batch, estimator=map_estimator(args, args.k),
+        denoise=not args.no_denoise)
+    if not args.no_denoise:
+        from .._mesh import denoise_iterations, noise_level
+
+        print(f"denoise: source noise level {noise_level(source):.3f}, "
+              f"{denoise_iterations(source)} Taubin iterations (per target: summary.json)",
+              file=sys.stderr)
     mine = len(process_share(range(len(todo))))
     bar = tqdm(total=mine, desc="targets", unit="target", disable=args.no_progress,
                file=sys.stderr)
@@ -317,7 +324,7 @@ def _write_target(args, run: _Run, i: int, res, part_names, per_face: bool, erro
     target = res.mesh
     rec = {"target": str(path), "status": "ok", "vertices": res.n_vertices,
            "dropped_rows": target.dropped_rows, "map_energy": res.map_energy,
-           "seconds": round(res.seconds, 4)}
+           "seconds": round(res.seconds, 4), "denoise_iterations": res.denoise_iterations}
     if per_face:
         rec["dropped_triangles"] = target.dropped_faces
     parts = res.main_body  # other components: labelled from the main body's nearest surface

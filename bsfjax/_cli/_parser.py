@@ -63,6 +63,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--one-start", action="store_true",
                    help="without landmarks: estimate the map from one start, not 15 with a "
                         "choice by geodesic distortion (16x faster, less accurate)")
+    p.add_argument("--no-denoise", action="store_true",
+                   help="use the meshes as they are (default: a noisy source or target is "
+                        "smoothed before its spectrum, by Taubin iterations chosen from its "
+                        "noise level; none on a clean mesh; the labels stay on its vertices)")
     p.add_argument("-k", type=int, default=30, help="spectral basis size (default 30)")
     p.add_argument("--method", default=None,
                    help="transfer method: refined (default: pull-back through the refined map; "

@@ -109,6 +109,19 @@ def _transfer_one(args) -> int:
             raise CLIError(f"truth file {args.truth}: expected one label per target {where} "
                            f"({n}), got shape {truth.shape}")
         truth = target.from_file_rows(truth, faces=per_face)
+    if not args.no_denoise:  # the spectra, map and transfer on smoothed geometry: same vertices
+        from .._mesh import denoise, denoise_iterations, noise_level
+
+        said = []
+        for role in ("source", "target"):
+            mesh = source if role == "source" else target
+            n_it = denoise_iterations(mesh)
+            said.append(f"{role} noise level {noise_level(mesh):.3f}, {n_it} Taubin iterations")
+            if role == "source":
+                source = denoise(source, n_it)
+            else:
+                target = denoise(target, n_it)
+        print(f"denoise: {'; '.join(said)}", file=sys.stderr)
     k = args.k
     kmax = min(source.n_vertices, target.n_vertices) - 1
     if not 1 <= k <= kmax:
@@ -221,8 +234,8 @@ def _transfer_one(args) -> int:
     result = target.to_file_rows(result, faces=per_face)
     if args.mesh_out:
         coloured = coloured_data(result, bool(args.labels))
-        save_mesh(args.mesh_out, target.file_mesh(), **({"cell_data": coloured} if per_face
-                                                         else {"point_data": coloured}))
+        save_mesh(args.mesh_out, target.file_mesh(),  # (the geometry as read: parts.whole)
+                  **({"cell_data": coloured} if per_face else {"point_data": coloured}))
     _write_array(args.out, result, names)
     print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else "")
           + dropped_note(target, per_face), file=sys.stderr)

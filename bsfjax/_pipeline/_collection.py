@@ -43,10 +43,10 @@ from collections.abc import Iterable, Iterator, Sequence
 from typing import NamedTuple
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .._util import BUCKET_FACTORS, merge_buckets, size_bucket
+from ._arrays import cast_tree, item_arrays
 from ._stages import StageConfig, capped_batch, dispatch_stages, stages_for
 from .._util import BSFError
 from .._maps import face_geometry
@@ -57,7 +57,8 @@ from ._face_labels import decide_face_labels, face_label_shares
 from ._collection_rows import (collection_estimator, file_row_results, landmark_lookup, on_body,
                                source_values, whole_result)
 from .._metrics import labels_to_indicators
-from .._mesh import MainBody, Mesh, load_mesh, split_main_body
+from .._mesh import (MainBody, Mesh, as_strength, denoise as denoise_mesh, denoise_iterations,
+                     load_mesh, split_main_body)
 from .._transfer import BSF, GeodesicBalls, SaturatedHeat, as_method, method_name
 from .._maps import REFINE_EIGENPAIRS
 from .._sampling import Subsample, subsample
@@ -103,6 +104,8 @@ class TargetTransfer(NamedTuple):
     #: the target's split ([`bsfjax.split_main_body`][bsfjax.split_main_body]): its main body
     #: was matched, its other components labelled from the nearest surface
     main_body: MainBody | None = None
+    #: the Taubin iterations of [`bsfjax.denoise`][bsfjax.denoise] on this target (0: none)
+    denoise_iterations: int = 0
 
 
 # --------------------------------------------------------------------------- host side
@@ -118,24 +121,14 @@ class _Target(NamedTuple):
     seconds: float
     p2p: np.ndarray | None = None  # without landmarks: the estimator's, chosen among starts
     turn_doubtful: bool | None = None  # and its MapEstimate.turn_doubtful
-    parts: MainBody | None = None  # the whole target: `mesh` is its main body
+    parts: MainBody | None = None  # the whole target: `mesh` is its (denoised) main body
+    denoised: int = 0  # the Taubin iterations run on the main body
 
 
 def _as_mesh(target) -> Mesh:
     if isinstance(target, Mesh):
         return target
     return load_mesh(target)
-
-
-def _pad_rows(x: np.ndarray, n: int) -> np.ndarray:
-    pad = n - x.shape[0]
-    return x if pad == 0 else np.concatenate([x, np.zeros((pad,) + x.shape[1:], x.dtype)])
-
-
-def _geometry_arrays(mesh: Mesh, m_b: int) -> dict:
-    g = face_geometry(mesh)
-    return {"faces": _pad_rows(g.faces, m_b), "K": _pad_rows(g.K, m_b),
-            "third_area": _pad_rows(g.third_area, m_b)}
 
 
 def _merged_sizes(targets: list, lm_of, keep: dict[int, Mesh] | None = None,
@@ -186,29 +179,6 @@ def _bucket_key(t: _Target, pad: bool, orient: bool, n_samples: int | None,
     return n_b, m_b, 0 if t.landmarks is None else len(t.landmarks[0]), s_b
 
 
-def _item_arrays(t: _Target, n_b: int, m_b: int, s_b: int) -> dict:
-    s = t.spectrum
-    out = {"evals": np.asarray(s.evals), "evecs": _pad_rows(np.asarray(s.evecs), n_b),
-           "mass": _pad_rows(np.asarray(s.mass), n_b)}
-    if t.samples is not None:
-        out["zo_indices"] = _pad_rows(t.samples.indices, s_b)
-        out["zo_cells"] = _pad_rows(t.samples.cells, n_b)
-    if t.p2p is not None:  # (padded vertices: zero mass, any source vertex)
-        out["p2p"] = _pad_rows(np.asarray(t.p2p, np.int32), n_b)
-    if t.landmarks is not None:  # the source's: in its operators (source_ops)
-        out["landmarks_target"] = np.asarray(t.landmarks[1], np.int32)
-    else:
-        out.update(_geometry_arrays(t.mesh, m_b))
-    return out
-
-
-def _cast_tree(tree):
-    dt = jax.dtypes.canonicalize_dtype(jnp.float64)
-    return jax.tree.map(lambda x: np.asarray(x, np.int32 if np.issubdtype(np.asarray(x).dtype,
-                                                                          np.integer) else dt),
-                        tree)
-
-
 def process_share(indices: Sequence[int]) -> list[int]:
     """The targets of this process: target ``i`` goes to global device ``i mod D``."""
     devices = jax.devices()
@@ -224,7 +194,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                         spectrum_cache: str | None = None,
                         errors: str = "raise", batch: int = 1, starts=None,
                         faces: bool = False, file_rows: bool = False,
-                        estimator: MapEstimator | None = None) -> Iterator[tuple[int, TargetTransfer | Exception]]:
+                        estimator: MapEstimator | None = None,
+                        denoise: bool | int | str = True) -> Iterator[tuple[int, TargetTransfer | Exception]]:
     """Transfer one segmentation (or functions) from ``source`` to every mesh of ``targets``.
 
     Yields ``(index, result)`` as batches finish (grouped by size bucket, so not in order);
@@ -270,6 +241,11 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
       holds ``n_energies``, ``zoomout_samples`` and ``starts``: leave those arguments out.
       The batched stages follow its ``wks_variance``, ``orient_weight`` and
       ``zoomout_step``, the targets without landmarks (several starts) all of it.
+    - `denoise`: ``True`` (default) computes the source's and every target's spectrum, map
+      and transfer on [`bsfjax.denoise`][bsfjax.denoise]'s geometry with the strength chosen
+      from each mesh (none on a clean mesh); the labels are on the original vertices, and
+      each result's ``denoise_iterations`` and ``mesh`` (as read) say what was done.
+      ``False``: the meshes as given; an integer: that many Taubin iterations on every mesh.
     - `pad`: pad vertex and face counts to `size_bucket` sizes, merged for a
       collection of at most 64 targets (module doc; ``False``: one compilation per distinct
       count).
@@ -295,10 +271,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     if method_name(method) == "std2":
         raise BSFError("method 'std2' needs a 2k x 2k map: not supported by transfer_collection")
     capped_batch(batch, check_int(k, "k", 2))  # (the dense systems: before any work)
+    strength = as_strength(denoise)
     src_parts = split_main_body(_as_mesh(source))  # a scan in pieces: its main body is matched
     vals = on_body(src_parts, source_values(src_parts.whole, values, faces, labels, file_rows),
                    faces)
-    source, n_m = src_parts.mesh, src_parts.mesh.n_vertices
+    source = denoise_mesh(src_parts.mesh, denoise_iterations(src_parts.mesh, strength))
+    n_m = source.n_vertices
     if faces:
         if not labels:
             raise BSFError("faces=True carries labels of triangles: labels must be True")
@@ -368,6 +346,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         if mesh.n_vertices <= k_spec:
             raise BSFError(f"{mesh.name or f'target {i}'}: {mesh.n_vertices} vertices, too few "
                            f"for {k_spec} eigenpairs")
+        n_it = denoise_iterations(mesh, strength)
+        mesh = denoise_mesh(mesh, n_it)
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
@@ -378,7 +358,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                             source_symmetry=source_symmetry())
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
-                       None if est is None else est.turn_doubtful, parts)
+                       None if est is None else est.turn_doubtful, parts, n_it)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -404,11 +384,11 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                           estimator.wks_variance, estimator.orient_weight,
                           estimator.zoomout_step)
         if p not in on_device:
-            src_arrays = _cast_tree(dict(rep, **(rep_orient if p == 0 else {})))
+            src_arrays = cast_tree(dict(rep, **(rep_orient if p == 0 else {})))
             on_device[p] = [jax.device_put(src_arrays, dev) for dev in devices]
         t = time.perf_counter()
         with one_blas_thread(cpu):
-            out = dispatch_stages(cfg, on_device[p], [_cast_tree(_item_arrays(tg, n_b, m_b, s_b))
+            out = dispatch_stages(cfg, on_device[p], [cast_tree(item_arrays(tg, n_b, m_b, s_b))
                                                 for tg in group],
                             [source_ops(cfg, tg, j // batch) for j, tg in enumerate(group)],
                             batch)
@@ -443,7 +423,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 C=map_to_unit_area(o["C"].astype(np.float64), *tg.factors, inverse=True),
                 map_energy=float(o["energy"]), unassigned_share=share_un,
                 agreement=agree, confidence=conf, regime=regime, n_vertices=n, mass=mass,
-                seconds=tg.seconds + share, turn_doubtful=tg.turn_doubtful, mesh=tg.mesh)
+                seconds=tg.seconds + share, turn_doubtful=tg.turn_doubtful,
+                mesh=tg.parts.mesh, denoise_iterations=tg.denoised)  # (the geometry as read)
             res = whole_result(res, tg.parts, src_parts, faces)  # (other components: nearest)
             yield tg.index, file_row_results(res, src_parts.whole, faces) if file_rows else res
 
