@@ -10,8 +10,8 @@ from ._util import (
     one_blas_thread, size_bucket, write_text_atomic,
 )
 from ._mesh import (
-    JOINTS, LABEL_NAMES, POSES, clean_mesh, edge_graph, is_face_file, knn_edges, mesh_edges,
-    sample_surface, subdivide,
+    JOINTS, LABEL_NAMES, POSES, auto_iterations, clean_mesh, edge_graph, is_face_file,
+    knn_edges, mesh_edges, sample_surface, subdivide, vertex_areas,
 )
 from ._spectral import (
     cotangent_stiffness, has_cholmod, interval_operators, mass_matrix,
@@ -45,18 +45,15 @@ from ._cli import (
 
 __all__ = [
     "ADAPTIVE_N_SCALES", "BUCKET_FACTORS", "CLIError", "CODERS", "DENSE_BUDGET_BYTES",
-    "FaceShares", "JOINTS",
-    "LABEL_NAMES", "MERGE_PADDING", "OrientationBasis", "POSES", "TURN_DOUBT", "as_coder",
-    "as_method", "atomic_path", "clean_mesh",
+    "FaceShares", "JOINTS", "LABEL_NAMES", "MERGE_PADDING", "OrientationBasis", "POSES",
+    "TURN_DOUBT", "as_coder", "as_method", "atomic_path", "auto_iterations", "clean_mesh",
     "cotangent_stiffness", "decide_face_labels", "decode_host", "decode_traced", "edge_graph",
     "effective_taus", "ell_matmul", "ell_rmatmul", "example_landmarks", "face_label_shares",
     "face_scores", "format_table", "geodesic_ball_radii", "has_cholmod", "hks_times",
     "interval_operators", "is_face_file", "kernel_mask", "knn_edges", "label_colour",
-    "mass_matrix",
-    "merge_buckets", "mesh_edges", "nearest_neighbors", "on_one_blas_thread", "one_blas_thread",
-    "orientation_bases", "pack_lists", "product_basis", "refinement_sizes", "run_demo",
-    "sample_surface", "size_bucket", "sparse_atoms", "sparse_gram", "subdivide", "unique_atoms",
-    "wks_energies",
-    "write_text_atomic",
+    "mass_matrix", "merge_buckets", "mesh_edges", "nearest_neighbors", "on_one_blas_thread",
+    "one_blas_thread", "orientation_bases", "pack_lists", "product_basis", "refinement_sizes",
+    "run_demo", "sample_surface", "size_bucket", "sparse_atoms", "sparse_gram", "subdivide",
+    "unique_atoms", "vertex_areas", "wks_energies", "write_text_atomic",
 ]
 __all__ += ["available_memory", "capped_batch", "check_fmap_memory", "check_path_clashes"]

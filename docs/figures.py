@@ -26,6 +26,7 @@ import numpy as np  # noqa: E402
 import bsfjax  # noqa: E402
 from bsfjax import plot  # noqa: E402
 from bsfjax.cli import main as main_cli  # noqa: E402
+from bsfjax.internal import vertex_areas  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data"
@@ -50,8 +51,7 @@ def render(out: Path) -> float:
     labels = np.array([index[got.names[l]] if l >= 0 else -1 for l in got.labels])
     truth = parts.labels  # FAUST registrations share the template's vertices
     right = labels == truth
-    area = np.zeros(target.n_vertices)
-    np.add.at(area, target.faces.ravel(), np.repeat(target.face_areas() / 3, 3))
+    area = vertex_areas(target)  # barycentric: a third of each incident triangle
     accuracy = float(np.sum(area * right) / np.sum(area))
     res_labels = labels
     panels = [

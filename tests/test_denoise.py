@@ -12,6 +12,7 @@ import pytest
 
 import bsfjax
 from bsfjax.cli import main
+from bsfjax.internal import vertex_areas
 
 from .conftest import data_path, icosphere
 
@@ -107,10 +108,7 @@ def _faust_case(tmp_path):
     noisy = _noisy(clean, 0.0025 * np.ptp(v[:, 1]), seed=10)
     noisy_path = tmp_path / "noisy.off"
     bsfjax.save_mesh(noisy_path, noisy)
-    mass = np.zeros(len(v))
-    for c in range(3):
-        np.add.at(mass, clean.faces[:, c], clean.face_areas() / 3)
-    return src, tgt, noisy_path, labels, truth, mass
+    return src, tgt, noisy_path, labels, truth, vertex_areas(clean)
 
 
 def _cli(*argv) -> str:

@@ -110,17 +110,15 @@ def _transfer_one(args) -> int:
                            f"({n}), got shape {truth.shape}")
         truth = target.from_file_rows(truth, faces=per_face)
     if not args.no_denoise:  # the spectra, map and transfer on smoothed geometry: same vertices
-        from .._mesh import denoise, denoise_iterations, noise_level
+        from .._mesh import auto_iterations, denoise, noise_level
 
-        said = []
-        for role in ("source", "target"):
-            mesh = source if role == "source" else target
-            n_it = denoise_iterations(mesh)
-            said.append(f"{role} noise level {noise_level(mesh):.3f}, {n_it} Taubin iterations")
-            if role == "source":
-                source = denoise(source, n_it)
-            else:
-                target = denoise(target, n_it)
+        said, smoothed = [], []
+        for role, mesh in (("source", source), ("target", target)):
+            level = noise_level(mesh)  # once: the iterations follow from it ("auto")
+            n_it = auto_iterations(level)
+            said.append(f"{role} noise level {level:.3f}, {n_it} Taubin iterations")
+            smoothed.append(denoise(mesh, n_it))
+        source, target = smoothed
         print(f"denoise: {'; '.join(said)}", file=sys.stderr)
     k = args.k
     kmax = min(source.n_vertices, target.n_vertices) - 1

@@ -16,13 +16,13 @@ from ._mesh import FileRows, Mesh, PointCloud
 from ._readers import load_mesh
 from ._mesh_write import save_mesh
 from ._subdivision import subdivide
-from ._denoise import as_strength, denoise, denoise_iterations, noise_level
+from ._denoise import as_strength, auto_iterations, denoise, denoise_iterations, noise_level
 
 __all__ = [
     "ExamplePair", "FileRows", "JOINTS", "LABEL_NAMES", "LabelFile", "MainBody", "Mesh",
-    "MeshReport", "POSES", "PointCloud", "as_strength", "clean_mesh", "denoise",
-    "denoise_iterations", "edge_graph", "example_mesh", "example_pair", "graph_from_edges",
-    "is_face_file", "knn_edges", "load_labels", "load_mesh", "mesh_edges", "mesh_report",
-    "n_components", "noise_level", "read_label_file", "sample_surface", "save_labels",
-    "save_mesh", "split_main_body", "subdivide", "vertex_areas",
+    "MeshReport", "POSES", "PointCloud", "as_strength", "auto_iterations", "clean_mesh",
+    "denoise", "denoise_iterations", "edge_graph", "example_mesh", "example_pair",
+    "graph_from_edges", "is_face_file", "knn_edges", "load_labels", "load_mesh", "mesh_edges",
+    "mesh_report", "n_components", "noise_level", "read_label_file", "sample_surface",
+    "save_labels", "save_mesh", "split_main_body", "subdivide", "vertex_areas",
 ]
