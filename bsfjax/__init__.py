@@ -16,7 +16,7 @@ from ._util import BSFError, MeshError, VERSION
 from ._mesh import (
     ExamplePair, FileRows, LabelFile, MainBody, Mesh, MeshReport, PointCloud, denoise,
     denoise_iterations, example_mesh, example_pair, load_labels, load_mesh, mesh_report,
-    noise_level, save_labels, save_mesh, split_main_body,
+    noise_level, save_labels, save_mesh, split_main_body, PreparedScan, prepare_scan,
 )
 
 # operators and spectrum
@@ -66,7 +66,7 @@ __all__ = [
     # mesh
     "Mesh", "FileRows", "MeshReport", "PointCloud", "load_mesh", "mesh_report", "save_mesh",
     "MainBody", "split_main_body",
-    "denoise", "denoise_iterations", "noise_level",
+    "denoise", "denoise_iterations", "noise_level", "PreparedScan", "prepare_scan",
     "ExamplePair",
     "example_mesh", "example_pair",
     # operators and spectrum

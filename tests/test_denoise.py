@@ -153,3 +153,31 @@ def test_collection_reports_strength(tmp_path):
     assert rows[str(tgt)]["denoise_iterations"] == 0
     lab = np.loadtxt(out / "noisy.txt", dtype=np.int64)
     assert lab.shape == (6890,) and np.mean(lab == truth) > 0.9
+
+
+def test_prepare_scan_split_then_denoise(sphere):
+    """`prepare_scan`: the main body of a noisy mesh with debris, smoothed as `denoise` smooths
+    that body alone, and values on it back on every vertex as read."""
+    h = np.mean(np.linalg.norm(sphere.vertices[sphere.faces[:, 0]]
+                               - sphere.vertices[sphere.faces[:, 1]], axis=1))
+    body = _noisy(sphere, 0.3 * h)
+    far = np.array([[5.0, 0, 0], [5.1, 0, 0], [5.0, 0.1, 0]])  # debris, out of reach
+    n = body.n_vertices
+    whole = bsfjax.Mesh(np.vstack([body.vertices, far]),
+                        np.vstack([body.faces, [[n, n + 1, n + 2]]]), name="scan")
+    prep = bsfjax.prepare_scan(whole)
+    assert prep.parts.n_other_components == 1 and prep.mesh.n_vertices == n
+    expected_it = bsfjax.denoise_iterations(body)
+    assert prep.denoise_iterations == expected_it > 0
+    assert prep.noise_level == pytest.approx(bsfjax.noise_level(body))
+    np.testing.assert_allclose(prep.mesh.vertices, bsfjax.denoise(body, expected_it).vertices)
+    assert "noise level" in prep.summary("target") and f"{expected_it} Taubin" in prep.summary()
+    back = prep.to_whole(np.arange(n))
+    assert back.shape == (n + 3,) and np.array_equal(back[:n], np.arange(n))
+    assert np.all(back[n:] == -1)  # too far from the body: unassigned
+    off = bsfjax.prepare_scan(whole, False)
+    assert off.denoise_iterations == 0 and off.noise_level is None
+    np.testing.assert_array_equal(off.mesh.vertices, body.vertices)
+    assert bsfjax.prepare_scan(whole, 3).denoise_iterations == 3
+    with pytest.raises(bsfjax.BSFError, match="denoise strength"):
+        bsfjax.prepare_scan(whole, -1)

@@ -272,10 +272,10 @@ def cmd_transfer_many(args, error) -> int:
         batch=1 if args.batch is None else args.batch, estimator=map_estimator(args, args.k),
         denoise=not args.no_denoise)
     if not args.no_denoise:
-        from .._mesh import denoise_iterations, noise_level
+        from .._mesh import prepare_scan
 
-        print(f"denoise: source noise level {noise_level(source):.3f}, "
-              f"{denoise_iterations(source)} Taubin iterations (per target: summary.json)",
+        # (of its main body, as transfer_collection measures it: cheap beside the spectra)
+        print(f"denoise: {prepare_scan(source).summary('source')} (per target: summary.json)",
               file=sys.stderr)
     mine = len(process_share(range(len(todo))))
     bar = tqdm(total=mine, desc="targets", unit="target", disable=args.no_progress,

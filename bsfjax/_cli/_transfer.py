@@ -57,7 +57,7 @@ def _transfer_one(args) -> int:
     import numpy as np
 
     from .._pipeline import transfer_labels, transfer_values
-    from .._mesh import load_mesh, save_mesh, split_main_body
+    from .._mesh import load_mesh, prepare_scan, save_mesh
     from .._spectral import spectrum
 
     if Path(args.out).suffix not in (".npy", ".txt") and not (
@@ -72,11 +72,13 @@ def _transfer_one(args) -> int:
     if kind not in ("estimate", "p2p", "fmap") or (kind == "estimate") != (len(rest) == 0) or len(rest) > 1:
         raise CLIError("--map must be 'estimate', 'p2p FILE' or 'fmap FILE'")
     landmarks = _parse_landmarks(args.landmarks)
-    # a scan in pieces: matched through its main body (one zero eigenvalue); the vertices of
-    # its other components are labelled from the nearest main-body vertex at the end
-    src_parts = split_main_body(load_mesh(args.source))
-    parts = split_main_body(load_mesh(args.target))
-    source, target = src_parts.mesh, parts.mesh
+    # a scan in pieces: matched through its main body (one zero eigenvalue), smoothed when it
+    # is noisy (the same vertices); its other components are labelled from the nearest
+    # main-body vertex at the end
+    src_prep = prepare_scan(load_mesh(args.source), not args.no_denoise)
+    prep = prepare_scan(load_mesh(args.target), not args.no_denoise)
+    src_parts, parts = src_prep.parts, prep.parts
+    source, target = src_prep.mesh, prep.mesh
     if src_parts.n_other_components:  # their labels are not carried
         print(f"source: {src_parts.other.size} vertices in {src_parts.n_other_components} other "
               "components left out (its main body is matched)", file=sys.stderr)
@@ -109,17 +111,8 @@ def _transfer_one(args) -> int:
             raise CLIError(f"truth file {args.truth}: expected one label per target {where} "
                            f"({n}), got shape {truth.shape}")
         truth = target.from_file_rows(truth, faces=per_face)
-    if not args.no_denoise:  # the spectra, map and transfer on smoothed geometry: same vertices
-        from .._mesh import auto_iterations, denoise, noise_level
-
-        said, smoothed = [], []
-        for role, mesh in (("source", source), ("target", target)):
-            level = noise_level(mesh)  # once: the iterations follow from it ("auto")
-            n_it = auto_iterations(level)
-            said.append(f"{role} noise level {level:.3f}, {n_it} Taubin iterations")
-            smoothed.append(denoise(mesh, n_it))
-        source, target = smoothed
-        print(f"denoise: {'; '.join(said)}", file=sys.stderr)
+    if not args.no_denoise:  # the spectra, map and transfer ran on smoothed geometry
+        print(f"denoise: {src_prep.summary('source')}; {prep.summary('target')}", file=sys.stderr)
     k = args.k
     kmax = min(source.n_vertices, target.n_vertices) - 1
     if not 1 <= k <= kmax:

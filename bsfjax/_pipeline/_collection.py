@@ -57,8 +57,7 @@ from ._face_labels import decide_face_labels, face_label_shares
 from ._collection_rows import (collection_estimator, file_row_results, landmark_lookup, on_body,
                                source_values, whole_result)
 from .._metrics import labels_to_indicators
-from .._mesh import (MainBody, Mesh, as_strength, denoise as denoise_mesh, denoise_iterations,
-                     load_mesh, split_main_body)
+from .._mesh import MainBody, Mesh, as_strength, load_mesh, prepare_scan
 from .._transfer import BSF, GeodesicBalls, SaturatedHeat, as_method, method_name
 from .._maps import REFINE_EIGENPAIRS
 from .._sampling import Subsample, subsample
@@ -272,10 +271,10 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         raise BSFError("method 'std2' needs a 2k x 2k map: not supported by transfer_collection")
     capped_batch(batch, check_int(k, "k", 2))  # (the dense systems: before any work)
     strength = as_strength(denoise)
-    src_parts = split_main_body(_as_mesh(source))  # a scan in pieces: its main body is matched
+    src_prep = prepare_scan(_as_mesh(source), strength)  # a scan in pieces: its main body,
+    src_parts, source = src_prep.parts, src_prep.mesh    # smoothed when noisy, is matched
     vals = on_body(src_parts, source_values(src_parts.whole, values, faces, labels, file_rows),
                    faces)
-    source = denoise_mesh(src_parts.mesh, denoise_iterations(src_parts.mesh, strength))
     n_m = source.n_vertices
     if faces:
         if not labels:
@@ -340,14 +339,13 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     def prepare(i, mesh: Mesh, t: float) -> _Target:
         """Target ``i``'s host work (``t``: when its reading began)."""
-        lm, parts = lm_of(i, mesh), split_main_body(mesh)  # matched: the main body alone
-        lm, mesh = (None if lm is None else (src_parts.index(lm[0], "source landmarks"),
-                                             parts.index(lm[1], "target landmarks"))), parts.mesh
+        lm, prep = lm_of(i, mesh), prepare_scan(mesh, strength)  # matched: the main body alone
+        parts, mesh, n_it = prep.parts, prep.mesh, prep.denoise_iterations
+        lm = None if lm is None else (src_parts.index(lm[0], "source landmarks"),
+                                      parts.index(lm[1], "target landmarks"))
         if mesh.n_vertices <= k_spec:
             raise BSFError(f"{mesh.name or f'target {i}'}: {mesh.n_vertices} vertices, too few "
                            f"for {k_spec} eigenpairs")
-        n_it = denoise_iterations(mesh, strength)
-        mesh = denoise_mesh(mesh, n_it)
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
