@@ -18,6 +18,7 @@ import numpy as np
 from ._components import MainBody, split_main_body
 from ._denoise import as_strength, auto_iterations, denoise, denoise_iterations, noise_level
 from ._mesh import Mesh
+from ._interop import as_mesh
 
 __all__ = ["PreparedScan", "prepare_scan"]
 
@@ -74,6 +75,7 @@ def prepare_scan(mesh: Mesh, denoise_strength=True) -> PreparedScan:
 
     **Returns:** a [`PreparedScan`][bsfjax.PreparedScan].
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     parts = split_main_body(mesh)
     strength = as_strength(denoise_strength)
     level = None
