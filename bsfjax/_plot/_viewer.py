@@ -375,6 +375,5 @@ def render(source, targets=None, out_dir=".", *, labels=None, results=None, trut
             path = out / f"{stem}_{view_name}.png".replace(" ", "_")
             ps.screenshot(str(path), transparent_bg=False)
             paths.append(path)
-    ps.remove_all_structures()
-    ps.set_build_default_gui_panels(True)
+    ps.set_build_default_gui_panels(True)  # (the last view's structures stay registered)
     return _scene(shapes, score, paths)
