@@ -119,9 +119,28 @@ def test_point_clouds_and_to_trimesh():
 
 
 def test_unknown_objects_are_one_clear_error():
-    with pytest.raises(bsfjax.MeshError, match=r"mesh must be a bsfjax.Mesh .*got int"):
+    with pytest.raises(bsfjax.MeshError, match=r"mesh must be a bsfjax.Mesh, got int"):
         bsfjax.spectrum(3, 5)
     with pytest.raises(bsfjax.MeshError, match="source_mesh must be a bsfjax.Mesh"):
         bsfjax.map_distortion(object(), object(), np.zeros(3, int))
     with pytest.raises(bsfjax.MeshError, match="face indices out of range"):
         bsfjax.as_mesh((np.zeros((3, 3)), np.array([[0, 1, 5]])))
+
+
+def test_the_pyfm_how_to_runs_on_pyfm_trimesh_objects(files):
+    pytest.importorskip("polyscope")
+    from pathlib import Path
+    import re
+
+    from pyFM.mesh import TriMesh
+
+    pair, (spath, tpath) = files
+    load = TriMesh.load if hasattr(TriMesh, "load") else TriMesh
+    ns = {"mesh1": load(str(spath)), "mesh2": load(str(tpath)), "p2p_21": pair.p2p,
+          "labels": pair.labels}
+    page = (Path(__file__).resolve().parents[1] / "docs" / "how-to" / "from-pyfm.md").read_text()
+    code = re.search(r"```python\n(.*?)```", page, re.S).group(1)
+    assert len(code.strip().splitlines()) == 5
+    exec(code.replace("bsfjax.view(mesh1, mesh2,", "bsfjax.view(mesh1, mesh2, backend='mock',"),
+         ns)
+    assert (ns["seg"].labels == pair.labels[pair.p2p]).mean() > 0.95

@@ -73,8 +73,8 @@ def as_mesh(obj, what: str = "mesh") -> Mesh:
     elif hasattr(obj, "points") and not isinstance(obj, np.ndarray):  # open3d PointCloud
         v, f = obj.points, None
     else:
-        raise MeshError(f"{what} must be a bsfjax.Mesh (or a trimesh / pyFM / open3d mesh or "
-                        f"point cloud, or a (vertices, faces) pair), got {type(obj).__name__}")
+        raise MeshError(f"{what} must be a bsfjax.Mesh, got {type(obj).__name__} (or a trimesh / "
+                        "pyFM / open3d mesh or point cloud, or a (vertices, faces) pair)")
     if not isinstance(obj, (tuple, list)):
         name = type(obj).__name__
     v = _array(v, "vertices", where)

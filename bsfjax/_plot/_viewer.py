@@ -221,8 +221,22 @@ def _scene(shapes, score=None, paths=()) -> ViewScene:
                      tuple(s.colours for s in shapes), score or {}, tuple(paths))
 
 
-def _build(ps, shapes, up: str, layout: str, angle: float = 0.0) -> None:
-    for i, (s, p) in enumerate(zip(shapes, _positions(shapes, up, angle, layout))):
+def _frame_camera(ps, positions: list[np.ndarray], aspect: float, margin: float = 1.08) -> None:
+    """A distant camera at −y (nearly orthographic: every shape seen straight on) looking at
+    the shapes' bounding box, its field of view fitted to it."""
+    pts = np.concatenate(positions)
+    lo, hi = pts.min(0), pts.max(0)
+    centre = (lo + hi) / 2
+    half = margin * max((hi - lo)[2], (hi - lo)[0] / aspect) / 2  # half the visible height
+    dist = 8.0 * half + (hi - lo)[1]
+    fov = 2 * np.degrees(np.arctan(half / (dist - (hi - lo)[1] / 2)))
+    ps.set_vertical_fov_degrees(float(fov))
+    ps.look_at(tuple(centre - [0, dist, 0]), tuple(centre))
+
+
+def _build(ps, shapes, up: str, layout: str, angle: float = 0.0) -> list[np.ndarray]:
+    positions = _positions(shapes, up, angle, layout)
+    for i, (s, p) in enumerate(zip(shapes, positions)):
         cloud = s.mesh.is_point_cloud
         register(ps, s.name, p, None if cloud else s.mesh.faces,
                  face_colours=None if cloud else s.colours,
@@ -231,6 +245,7 @@ def _build(ps, shapes, up: str, layout: str, angle: float = 0.0) -> None:
     ps.set_up_dir("z_up")
     ps.set_front_dir("neg_y_front")
     ps.set_ground_plane_mode("shadow_only")
+    return positions
 
 
 def _checks(layout, up):
@@ -369,8 +384,7 @@ def render(source, targets=None, out_dir=".", *, labels=None, results=None, trut
     for group in groups:
         for view_name, angle in angles:
             ps.remove_all_structures()
-            _build(ps, group, up, "side", angle)
-            ps.reset_camera_to_home_view()
+            _frame_camera(ps, _build(ps, group, up, "side", angle), w / h)
             stem = prefix if layout == "side" else f"{prefix}_{group[0].name}"
             path = out / f"{stem}_{view_name}.png".replace(" ", "_")
             ps.screenshot(str(path), transparent_bg=False)
