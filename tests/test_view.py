@@ -181,8 +181,9 @@ plot.render(bsfjax.Mesh(v, f), None, {str(tmp_path)!r}, labels=lab, size=(200, 1
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300)
     if run.returncode != 0:
-        if "could not start its egl backend" in run.stderr:
-            pytest.skip("EGL is not available here: " + run.stderr.strip().splitlines()[-1])
+        if "could not start its egl backend" in run.stderr or "EGL" in run.stderr:
+            last = (run.stderr.strip().splitlines() or ["(no message)"])[-1]
+            pytest.skip(f"EGL is not available here (exit status {run.returncode}): {last}")
         raise AssertionError(run.stderr)
     import matplotlib.image as mpimg
 
