@@ -32,15 +32,16 @@ def accuracy(labels, truth, mass) -> float:
 
 
 def run_cli(source: str, target: str, labels: str, out: str, landmarks: bool, denoise: bool):
-    """``bsfjax transfer`` in this process: the labels written, the stderr text."""
+    """``bsfjax transfer`` in this process: the labels written, the stderr text.  ``landmarks``:
+    ``True`` (the 5 pairs ``LANDMARKS``), ``False`` (none) or ``(source rows, target rows)``."""
     import numpy as np
 
     from bsfjax.cli import main
 
     argv = ["transfer", source, target, "--labels", labels, "--out", out]
     if landmarks:
-        ids = ",".join(map(str, LANDMARKS))
-        argv += ["--landmarks", f"{ids}:{ids}"]
+        src, tgt = (LANDMARKS, LANDMARKS) if landmarks is True else landmarks
+        argv += ["--landmarks", f"{','.join(map(str, src))}:{','.join(map(str, tgt))}"]
     if not denoise:
         argv.append("--no-denoise")
     err = io.StringIO()
@@ -52,24 +53,27 @@ def run_cli(source: str, target: str, labels: str, out: str, landmarks: bool, de
     return np.loadtxt(out, dtype=np.int64), err.getvalue()
 
 
-def run_pyfm(source, target, truth, mass) -> float:
+def run_pyfm(source, target, truth, mass, landmarks=None, target_truth=None) -> float:
     """pyFM's own pipeline (its README's: WKS with the 5 landmarks, a 35 × 35 map, ZoomOut
     15 steps on 2000 samples) from ``source`` to ``target``: the accuracy of the pulled-back
-    labels."""
+    labels.  ``landmarks``: ``(source rows, target rows)`` instead of ``LANDMARKS`` on both;
+    ``target_truth``: the target's labels when its vertices are not the source's (``truth``:
+    the source's)."""
     import numpy as np
     from pyFM.functional import FunctionalMapping
     from pyFM.mesh import TriMesh
 
     model = FunctionalMapping(*[TriMesh(np.array(m.vertices), np.array(m.faces))
                                 for m in (source, target)])
-    lm = np.stack([LANDMARKS, LANDMARKS], axis=1)
+    lm = np.stack(landmarks or [LANDMARKS, LANDMARKS], axis=1)
     with h.warnings.catch_warnings():
         h.warnings.simplefilter("ignore")
         model.preprocess(n_descr=100, descr_type="WKS", landmarks=lm, subsample_step=5,
                          k_process=200, verbose=False)
         model.fit(K=(35, 35), w_descr=1e0, w_lap=1e-2, w_dcomm=1e-1, w_orient=0)
         model.zoomout_refine(nit=15, step=1, subsample=2000, verbose=False)
-    return accuracy(truth[model.get_p2p()], truth, mass)
+    return accuracy(truth[model.get_p2p()], truth if target_truth is None else target_truth,
+                    mass)
 
 
 def run(data, folder, pairs, sigmas, landmark_free: bool, pyfm: bool = False) -> list[dict]:

@@ -17,6 +17,7 @@ from ._mesh import (
     ExamplePair, FileRows, LabelFile, MainBody, Mesh, MeshReport, PointCloud, denoise,
     denoise_iterations, example_mesh, example_pair, load_labels, load_mesh, mesh_report,
     noise_level, save_labels, save_mesh, split_main_body, PreparedScan, prepare_scan,
+    HoleFill, boundary_loops, fill_holes,
 )
 from ._mesh import as_mesh
 
@@ -58,7 +59,8 @@ from ._pipeline import (
 )
 
 # metrics and test functions
-from ._metrics import indicators_to_labels, labels_to_indicators, random_indicators, relative_error
+from ._metrics import (indicators_to_labels, labels_to_indicators, missing_labels,
+                       random_indicators, relative_error)
 
 __version__ = VERSION
 
@@ -83,6 +85,7 @@ __all__ = [
     "Mesh", "FileRows", "MeshReport", "PointCloud", "as_mesh", "view", "load_mesh", "mesh_report", "save_mesh",
     "MainBody", "split_main_body",
     "denoise", "denoise_iterations", "noise_level", "PreparedScan", "prepare_scan",
+    "HoleFill", "boundary_loops", "fill_holes",
     "ExamplePair",
     "example_mesh", "example_pair",
     # operators and spectrum
@@ -111,6 +114,6 @@ __all__ = [
     "transfer_values", "transfer_labels",
     "transfer_face_labels", "face_labels_from_vertices", "transfer_collection", "TargetTransfer",
     # metrics
-    "relative_error", "indicators_to_labels", "labels_to_indicators", "random_indicators",
+    "relative_error", "missing_labels", "indicators_to_labels", "labels_to_indicators", "random_indicators",
     "LabelFile", "load_labels", "save_labels",
 ]

@@ -138,6 +138,15 @@ def read_values(args, source, on_mesh: bool = True):
     return (values.T if values.ndim == 2 else values), names, per_face
 
 
+def part_list(ids, names=None) -> str:
+    """``leftHand, rightFoot`` (``names``: part names by label; else the label numbers), or
+    ``none``."""
+    if len(ids) == 0:
+        return "none"
+    return ", ".join(names[i] if names is not None and 0 <= i < len(names) else str(i)
+                     for i in map(int, ids))
+
+
 def dropped_note(mesh, per_face: bool = False) -> str:
     """``"; ..."``: the rows of ``mesh``'s file its reader dropped, which an output leaves at
     -1 / NaN (empty when none)."""

@@ -339,7 +339,15 @@ def _write_target(args, run: _Run, i: int, res, part_names, per_face: bool, erro
             tqdm.write(f"bsfjax transfer: {path}: warning: {TURN_DOUBT}", file=sys.stderr)
     if labels:
         rec.update(unassigned_share=res.unassigned_share, regime=res.regime,
-                   confidence=res.confidence, agreement=res.agreement)
+                   confidence=res.confidence, agreement=res.agreement,
+                   missing_parts=[part_names[j] if part_names is not None
+                                  and 0 <= j < len(part_names) else j for j in res.missing],
+                   filled_vertices=res.filled_vertices)
+        if res.missing:
+            from ._io import part_list
+
+            tqdm.write(f"bsfjax transfer: {path}: source parts with no counterpart on the "
+                       f"target: {part_list(res.missing, part_names)}", file=sys.stderr)
         truth = _truth(args.truth_dir, path.stem, len(res.labels), part_names, error,
                        per_face)
         if truth is not None:

@@ -7,7 +7,7 @@ import warnings
 from pathlib import Path
 
 from ._io import (TURN_DOUBT, CLIError, _read_array, _write_array, coloured_data, dropped_note,
-                  is_json, map_estimator, read_truth, read_values)
+                  is_json, map_estimator, part_list, read_truth, read_values)
 from .._mesh import is_face_file
 
 
@@ -28,6 +28,20 @@ def _parse_landmarks(text: str | None):
         raise CLIError(f"--landmarks: {len(src)} source and {len(tgt)} target indices; the two "
                        "lists must have the same, non-zero length")
     return src, tgt
+
+
+def missing_line(values, result, src_prep, prep, per_face: bool, names=None) -> str:
+    """The line naming the source labels (parts) with no counterpart on the target (a partial
+    target): [`missing_labels`][bsfjax.missing_labels] over the two bodies' own areas (the
+    vertices, triangles, as read: hole patches left out)."""
+    from .._metrics import MISSING_RATIO, missing_labels
+    from .._mesh import vertex_areas
+
+    area = (lambda m: m.face_areas()) if per_face else vertex_areas
+    gone = missing_labels(src_prep.restrict(values, faces=per_face), area(src_prep.body),
+                          prep.restrict(result, faces=per_face), area(prep.body))
+    return (f"source parts with no counterpart on the target (under {MISSING_RATIO:.0%} of "
+            f"their source share of the area): {part_list(gone, names)}")
 
 
 def _cmd_transfer(args) -> int:
@@ -79,6 +93,9 @@ def _transfer_one(args) -> int:
     prep = prepare_scan(load_mesh(args.target), not args.no_denoise)
     src_parts, parts = src_prep.parts, prep.parts
     source, target = src_prep.mesh, prep.mesh
+    # (holes closed for the spectrum: file rows are read onto the bodies, whose vertices and
+    # triangles come first in source / target)
+    src_body, body = src_prep.body, prep.body
     if src_parts.n_other_components:  # their labels are not carried
         print(f"source: {src_parts.other.size} vertices in {src_parts.n_other_components} other "
               "components left out (its main body is matched)", file=sys.stderr)
@@ -94,8 +111,10 @@ def _transfer_one(args) -> int:
                                                             mesh.n_file_rows),
                                               f"--landmarks ({side})").tolist()
                           for lm, side, mesh in zip(landmarks, ("source", "target"),
-                                                    (source, target)))
-    values, names, per_face = read_values(args, source)
+                                                    (src_body, body)))
+    values, names, per_face = read_values(args, src_body)
+    values = (src_prep.extend(values.T).T if values.ndim == 2 else
+              src_prep.extend(values, faces=per_face))
     if per_face and target.is_point_cloud:
         raise CLIError(f"{target.name}: per-triangle labels need a triangle target; a point "
                        "cloud has none (give one label per source vertex)")
@@ -105,14 +124,17 @@ def _transfer_one(args) -> int:
     truth = None
     if args.truth:
         truth = read_truth(args.truth, names)
-        where, n = (("triangle", target.n_file_faces) if per_face else
-                    ("vertex", target.n_file_rows))
+        where, n = (("triangle", body.n_file_faces) if per_face else
+                    ("vertex", body.n_file_rows))
         if truth.shape != (n,):
             raise CLIError(f"truth file {args.truth}: expected one label per target {where} "
                            f"({n}), got shape {truth.shape}")
-        truth = target.from_file_rows(truth, faces=per_face)
+        truth = body.from_file_rows(truth, faces=per_face)
     if not args.no_denoise:  # the spectra, map and transfer ran on smoothed geometry
         print(f"denoise: {src_prep.summary('source')}; {prep.summary('target')}", file=sys.stderr)
+    for p_, role in ((src_prep, "source"), (prep, "target")):
+        if p_.n_added:
+            print(p_.fill_summary(role), file=sys.stderr)
     k = args.k
     kmax = min(source.n_vertices, target.n_vertices) - 1
     if not 1 <= k <= kmax:
@@ -135,14 +157,14 @@ def _transfer_one(args) -> int:
         k_spec = min(max(k_spec, REFINE_EIGENPAIRS), kmax)
     if kind == "p2p":  # read and checked before the spectra, so a bad file costs nothing
         p2p = _read_array(rest[0], "p2p", dtype=int)
-        if p2p.shape != (target.n_file_rows,):
-            raise CLIError(f"p2p file {rest[0]}: expected {target.n_file_rows} source vertex indices in "
-                           f"[0, {source.n_file_rows}), got shape {p2p.shape}")
+        if p2p.shape != (body.n_file_rows,):
+            raise CLIError(f"p2p file {rest[0]}: expected {body.n_file_rows} source vertex indices in "
+                           f"[0, {src_body.n_file_rows}), got shape {p2p.shape}")
         from .._util import check_indices
 
         try:  # one source row per target row: the kept rows, onto the kept source vertices
-            p2p = check_indices(p2p, "p2p", source.n_file_rows, what="source vertex indices")
-            p2p = source.file_row_index(target.from_file_rows(p2p), "p2p (source)")
+            p2p = check_indices(p2p, "p2p", src_body.n_file_rows, what="source vertex indices")
+            p2p = prep.extend(src_body.file_row_index(body.from_file_rows(p2p), "p2p (source)"))
         except ValueError as exc:
             raise CLIError(f"p2p file {rest[0]}: {exc}") from None
     sm = spectrum(source, k_spec, cache_dir=args.spectrum_cache)
@@ -192,6 +214,7 @@ def _transfer_one(args) -> int:
         print(f"transferred {np.unique(values).size} labels "
               f"{'of triangles ' if per_face else ''}with {args.method}; unassigned: "
               f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
+        print(missing_line(values, result, src_prep, prep, per_face, names), file=sys.stderr)
         if res.regime is not None:
             why = [] if res.agreement is None else [f"{res.agreement:.1%} of the area as the "
                                                     "input map's pull-back"]
@@ -201,12 +224,12 @@ def _transfer_one(args) -> int:
                   file=sys.stderr)
         if truth is not None:
             area = target.face_areas() if per_face else np.asarray(sn.mass)
-            if parts.n_other_components:  # over the whole target: its other components too
+            if parts.n_other_components or prep.n_added:  # over the whole target as read
                 from .._mesh import vertex_areas
 
                 whole, on_whole = parts.whole, True
-                result, truth = (parts.to_whole(result, faces=per_face),
-                                 whole.from_file_rows(target.to_file_rows(truth, faces=per_face),
+                result, truth = (prep.to_whole(result, faces=per_face),
+                                 whole.from_file_rows(body.to_file_rows(truth, faces=per_face),
                                                       faces=per_face))
                 area = whole.face_areas() if per_face else vertex_areas(whole)
             correct = result == truth
@@ -217,10 +240,11 @@ def _transfer_one(args) -> int:
         result = transfer_values(sm, sn, values, **common)
         result = result.T if result.ndim == 2 else result
     # every file written has the target file's rows: -1 / NaN where the reader dropped one
-    if parts.n_other_components:
+    if parts.n_other_components or prep.n_added:
         if not on_whole:  # (already there for the accuracy)
-            result = parts.to_whole(result, faces=per_face)
-        print(parts.summary(), file=sys.stderr)
+            result = prep.to_whole(result, faces=per_face)
+        if parts.n_other_components:
+            print(parts.summary(), file=sys.stderr)
     target = parts.whole
     result = target.to_file_rows(result, faces=per_face)
     if args.mesh_out:

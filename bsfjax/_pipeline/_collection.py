@@ -54,10 +54,12 @@ from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
 from .._maps import MapEstimator, check_starts
 from ._face_labels import decide_face_labels, face_label_shares
-from ._collection_rows import (collection_estimator, file_row_results, landmark_lookup, on_body,
-                               source_values, whole_result)
+from ._collection_rows import (body_result, collection_estimator, file_row_results,
+                               landmark_lookup, missing_parts, on_body, source_values,
+                               whole_result)
 from .._metrics import labels_to_indicators
-from .._mesh import MainBody, Mesh, as_mesh, as_strength, is_mesh_like, load_mesh, prepare_scan
+from .._mesh import (HoleFill, MainBody, Mesh, as_mesh, as_strength, is_mesh_like, load_mesh,
+                     prepare_scan)
 from .._transfer import BSF, GeodesicBalls, SaturatedHeat, as_method, method_name
 from .._maps import REFINE_EIGENPAIRS
 from .._sampling import Subsample, subsample
@@ -105,6 +107,11 @@ class TargetTransfer(NamedTuple):
     main_body: MainBody | None = None
     #: the Taubin iterations of [`bsfjax.denoise`][bsfjax.denoise] on this target (0: none)
     denoise_iterations: int = 0
+    #: labels: the source labels with no counterpart on this target (a partial target; see
+    #: [`bsfjax.missing_labels`][bsfjax.missing_labels]), in increasing order
+    missing: tuple = ()
+    #: the vertices its hole patches added for the spectrum (dropped from every result)
+    filled_vertices: int = 0
 
 
 # --------------------------------------------------------------------------- host side
@@ -122,6 +129,7 @@ class _Target(NamedTuple):
     turn_doubtful: bool | None = None  # and its MapEstimate.turn_doubtful
     parts: MainBody | None = None  # the whole target: `mesh` is its (denoised) main body
     denoised: int = 0  # the Taubin iterations run on the main body
+    fill: HoleFill | None = None  # the holes closed for its spectrum (`mesh` has them)
 
 
 def _as_mesh(target) -> Mesh:
@@ -275,6 +283,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     src_parts, source = src_prep.parts, src_prep.mesh    # smoothed when noisy, is matched
     vals = on_body(src_parts, source_values(src_parts.whole, values, faces, labels, file_rows),
                    faces)
+    body_vals = vals  # (on the source's body; `vals`: also on its hole patches, if any)
+    vals = np.moveaxis(src_prep.extend(np.moveaxis(np.asarray(vals), -1, 0), faces=faces), 0, -1)
     n_m = source.n_vertices
     if faces:
         if not labels:
@@ -356,7 +366,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                             source_symmetry=source_symmetry())
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
-                       None if est is None else est.turn_doubtful, parts, n_it)
+                       None if est is None else est.turn_doubtful, parts, n_it, prep.fill)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -412,10 +422,10 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             share_un = 0.0
             if faces:
                 lab, _, share_un, agree, conf, regime = decide_face_labels(
-                    tg.mesh, shares, vals_j, p2p, threshold, refined)
+                    tg.mesh, shares, vals_j, p2p, threshold, refined)[:6]
             elif labels:
                 lab, _, share_un, agree, conf, regime = _decide_labels(
-                    ids, vals_j, mass, threshold, refined, vals[p2p])
+                    ids, vals_j, mass, threshold, refined, vals[p2p])[:6]
             res = TargetTransfer(
                 labels=lab, values=vals_j, p2p=p2p,
                 C=map_to_unit_area(o["C"].astype(np.float64), *tg.factors, inverse=True),
@@ -423,7 +433,10 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 agreement=agree, confidence=conf, regime=regime, n_vertices=n, mass=mass,
                 seconds=tg.seconds + share, turn_doubtful=tg.turn_doubtful,
                 mesh=tg.parts.mesh, denoise_iterations=tg.denoised)  # (the geometry as read)
+            res = body_result(res, tg.fill, src_prep, faces)  # (hole patches dropped)
             res = whole_result(res, tg.parts, src_parts, faces)  # (other components: nearest)
+            if labels:
+                res = res._replace(missing=missing_parts(res, body_vals, src_prep.body, faces))
             yield tg.index, file_row_results(res, src_parts.whole, faces) if file_rows else res
 
     targets = list(targets)

@@ -15,6 +15,7 @@ import numpy as np
 
 from .._maps import MapEstimator, check_landmark_pairs
 from .._mesh import MainBody, Mesh, vertex_areas
+from .._metrics import missing_labels
 from .._util import BSFError
 
 _DEFAULT = MapEstimator()
@@ -115,5 +116,32 @@ def whole_result(res, parts: MainBody, src_parts: MainBody, faces: bool):
                         mesh=whole, main_body=parts)
 
 
-__all__ = ["collection_estimator", "file_row_results", "landmark_lookup", "on_body",
+def body_result(res, fill, src_prep, faces: bool):
+    """A [`TargetTransfer`][bsfjax.TargetTransfer] on a target's filled mesh on its body (the
+    main body as read): the hole patches' vertices (triangles) dropped, its point map's
+    entries on the source's patches replaced by their nearest original source vertex, and its
+    mass the body's vertex areas (at the scale of the spectrum's)."""
+    p2p = np.asarray(res.p2p)
+    if src_prep.n_added:  # (a source vertex of a patch: its nearest original one)
+        n0 = src_prep.body.n_vertices
+        p2p = np.where(p2p >= n0, src_prep.fill.nearest[np.maximum(p2p - n0, 0)], p2p)
+    if fill is None:
+        return res._replace(p2p=p2p)
+    body = fill.original
+    mass = vertex_areas(body) * (float(np.sum(res.mass)) / fill.mesh.area)
+    labels = None if res.labels is None else fill.restrict(res.labels, faces=faces)
+    return res._replace(labels=labels, values=fill.restrict(res.values.T).T,
+                        p2p=fill.restrict(p2p), mass=mass, n_vertices=body.n_vertices,
+                        filled_vertices=fill.n_added)
+
+
+def missing_parts(res, source_labels, source_body: Mesh, faces: bool) -> tuple:
+    """The source labels with no counterpart on a target ([`missing_labels`][bsfjax.missing_labels]):
+    the source's on its body (its own areas), the target's on the target as read."""
+    area_m = source_body.face_areas() if faces else vertex_areas(source_body)
+    area_n = res.mesh.face_areas() if faces else res.mass
+    return tuple(int(i) for i in missing_labels(source_labels, area_m, res.labels, area_n))
+
+
+__all__ = ["body_result", "collection_estimator", "missing_parts", "file_row_results", "landmark_lookup", "on_body",
            "source_values", "whole_result"]

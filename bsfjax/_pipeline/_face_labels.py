@@ -31,6 +31,7 @@ from jaxtyping import ArrayLike, Int
 from .._util import BSFError
 from ._mesh_level import LabelTransfer, _decide_labels, _split_label_kwargs, transfer_values
 from .._mesh import Mesh
+from .._metrics import missing_labels
 from .._spectral import Spectrum
 from .._util import check_source_mesh, compact_labels, require_triangles
 from .._mesh import as_mesh
@@ -147,8 +148,11 @@ def transfer_face_labels(source: Spectrum, target: Spectrum, face_labels: Int[Ar
     method, inputs, threshold, refined = _split_label_kwargs(method, threshold, kwargs)
     inputs["mesh"] = source_mesh
     moved = transfer_values(source, target, shares, method=method, **inputs)
-    return decide_face_labels(target_mesh, FaceShares(ids, shares), moved, inputs.get("p2p"),
-                              threshold, refined)
+    res = decide_face_labels(target_mesh, FaceShares(ids, shares), moved, inputs.get("p2p"),
+                             threshold, refined)
+    gone = missing_labels(np.asarray(face_labels), source_mesh.face_areas(), res.labels,
+                          target_mesh.face_areas())
+    return res._replace(missing=tuple(int(i) for i in gone))
 
 
 def decide_face_labels(target_mesh: Mesh, shares: FaceShares, moved, p2p, threshold: float,

@@ -17,7 +17,7 @@ from .._transfer import AbstractMethod, BSF, GeodesicBalls, PullBack, RefinedPul
 from .._transfer import Pair, transfer
 from .._util import BSFError
 from .._sampling import geodesic_distances
-from .._metrics import labels_to_indicators
+from .._metrics import labels_to_indicators, missing_labels
 from .._sampling import farthest_point_sampling
 from .._spectral import Spectrum
 from .._util import on_one_blas_thread
@@ -161,6 +161,10 @@ class LabelTransfer(NamedTuple):
     #: ``"refined"`` only: how much the refinement changed the input map's labels — see
     #: [`REGIMES`][bsfjax.REGIMES]; ``None`` for the other methods
     regime: str | None = None
+    #: the source labels with (almost) no counterpart on the target, in increasing order: a
+    #: part under ``MISSING_RATIO`` of its source share of the area (see
+    #: [`missing_labels`][bsfjax.missing_labels]; a partial target)
+    missing: tuple = ()
 
 
 #: Regimes of the ``"refined"`` transfer (from the map alone, never from ground truth):
@@ -212,8 +216,11 @@ def transfer_labels(source: Spectrum, target: Spectrum, labels: Int[ArrayLike, "
                              np.asarray(labels_to_indicators(codes, len(ids))), method=method,
                              **inputs)
     p2p = inputs.get("p2p")
-    return _decide_labels(ids, scores, np.asarray(target.mass, dtype=float), threshold, refined,
-                          None if p2p is None else lab[np.asarray(p2p)])
+    mass = np.asarray(target.mass, dtype=float)
+    res = _decide_labels(ids, scores, mass, threshold, refined,
+                         None if p2p is None else lab[np.asarray(p2p)])
+    gone = missing_labels(lab, np.asarray(source.mass, dtype=float), res.labels, mass)
+    return res._replace(missing=tuple(int(i) for i in gone))
 
 
 #: What ``transfer_labels`` passes on to [`transfer_values`][bsfjax.transfer_values] as inputs; its other keyword
