@@ -14,7 +14,8 @@ from ._util import BSFError, MeshError, VERSION
 
 # mesh
 from ._mesh import (
-    ExamplePair, FileRows, LabelFile, MainBody, Mesh, MeshReport, PointCloud, denoise,
+    ExamplePair, FileRows, LabelFile, MainBody, Mesh, MeshReport, PointCloud, cloud_normals,
+    cloud_surface, denoise,
     denoise_iterations, example_mesh, example_pair, load_labels, load_mesh, mesh_report,
     noise_level, save_labels, save_mesh, split_main_body,
 )
@@ -64,7 +65,7 @@ __version__ = VERSION
 __all__ = [
     "BSFError", "MeshError",
     # mesh
-    "Mesh", "FileRows", "MeshReport", "PointCloud", "load_mesh", "mesh_report", "save_mesh",
+    "Mesh", "FileRows", "MeshReport", "PointCloud", "cloud_normals", "cloud_surface", "load_mesh", "mesh_report", "save_mesh",
     "MainBody", "split_main_body",
     "denoise", "denoise_iterations", "noise_level",
     "ExamplePair",

@@ -3,7 +3,7 @@
 `Mesh` (vertices, triangles, or none: a `PointCloud`, cleaning of unreferenced vertices and degenerate faces, areas,
 edges, components), reading and writing mesh files (OFF, PLY, OBJ, STL, ... through meshio,
 with fast paths for plain OFF/PLY), segmentation files (`.txt` / `.npy`, SMPL's `.json`,
-per-triangle `.seg`), loop subdivision, denoising (Taubin smoothing with a strength from a noise estimate), and the built-in example pair.
+per-triangle `.seg`), loop subdivision, denoising (Taubin smoothing with a strength from a noise estimate; of point clouds too), a point cloud's oriented stand-in surface (`cloud_surface`), and the built-in example pair.
 """
 
 from ._example import ExamplePair, JOINTS, LABEL_NAMES, POSES, example_mesh, example_pair
@@ -16,13 +16,15 @@ from ._mesh import FileRows, Mesh, PointCloud
 from ._readers import load_mesh
 from ._mesh_write import save_mesh
 from ._subdivision import subdivide
-from ._denoise import as_strength, auto_iterations, denoise, denoise_iterations, noise_level
+from ._denoise import (as_strength, auto_iterations, denoise, denoise_iterations, mesh_threshold,
+                       noise_level)
+from ._cloud_surface import CloudSurface, cloud_normals, cloud_surface, surface_for_map
 
 __all__ = [
-    "ExamplePair", "FileRows", "JOINTS", "LABEL_NAMES", "LabelFile", "MainBody", "Mesh",
+    "CloudSurface", "ExamplePair", "FileRows", "JOINTS", "LABEL_NAMES", "LabelFile", "MainBody", "Mesh",
     "MeshReport", "POSES", "PointCloud", "as_strength", "auto_iterations", "clean_mesh",
     "denoise", "denoise_iterations", "edge_graph", "example_mesh", "example_pair",
     "graph_from_edges", "is_face_file", "knn_edges", "load_labels", "load_mesh", "mesh_edges",
-    "mesh_report", "n_components", "noise_level", "read_label_file", "sample_surface",
+    "mesh_report", "mesh_threshold", "cloud_normals", "cloud_surface", "surface_for_map", "n_components", "noise_level", "read_label_file", "sample_surface",
     "save_labels", "save_mesh", "split_main_body", "subdivide", "vertex_areas",
 ]
