@@ -157,6 +157,7 @@ def main():
     ap.add_argument("--seeds", default="0", help="sampling seeds (noise: seed + 1)")
     ap.add_argument("--pairs", default="000-010", help="FAUST pairs SRC-TGT, comma-separated")
     ap.add_argument("--no-clean", action="store_true", help="noisy clouds only")
+    ap.add_argument("--no-mesh", action="store_true", help="without the clean mesh pair")
     args = ap.parse_args()
     data = h.Path(args.data)
     pairs = tuple(tuple(p.split("-")) for p in args.pairs.split(","))
@@ -165,7 +166,8 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         rows = run(data, h.Path(tmp), pairs=pairs,
                    points=tuple(int(x) for x in args.points.split(",")), noise=args.noise,
-                   seeds=tuple(int(x) for x in args.seeds.split(",")), clean=not args.no_clean)
+                   seeds=tuple(int(x) for x in args.seeds.split(",")), clean=not args.no_clean,
+                   mesh=not args.no_mesh)
     out = h.Path(args.out)
     h.write_json(out / "bench_point_clouds.json",
                  {"machine": h.short_machine(), "noise": args.noise, "rows": rows})
