@@ -158,6 +158,8 @@ def main():
     ap.add_argument("--pairs", default="000-010", help="FAUST pairs SRC-TGT, comma-separated")
     ap.add_argument("--no-clean", action="store_true", help="noisy clouds only")
     ap.add_argument("--no-mesh", action="store_true", help="without the clean mesh pair")
+    ap.add_argument("--landmarks", choices=("both", "5", "none"), default="both",
+                    help="with 5 landmark pairs, without, or both")
     args = ap.parse_args()
     data = h.Path(args.data)
     pairs = tuple(tuple(p.split("-")) for p in args.pairs.split(","))
@@ -167,7 +169,8 @@ def main():
         rows = run(data, h.Path(tmp), pairs=pairs,
                    points=tuple(int(x) for x in args.points.split(",")), noise=args.noise,
                    seeds=tuple(int(x) for x in args.seeds.split(",")), clean=not args.no_clean,
-                   mesh=not args.no_mesh)
+                   mesh=not args.no_mesh,
+                   landmarks={"both": (True, False), "5": (True,), "none": (False,)}[args.landmarks])
     out = h.Path(args.out)
     h.write_json(out / "bench_point_clouds.json",
                  {"machine": h.short_machine(), "noise": args.noise, "rows": rows})

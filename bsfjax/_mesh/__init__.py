@@ -17,8 +17,8 @@ from ._readers import load_mesh
 from ._mesh_write import save_mesh
 from ._subdivision import subdivide
 from ._denoise import (as_strength, auto_iterations, denoise, denoise_iterations, mesh_threshold,
-                       noise_level)
-from ._cloud_surface import CloudSurface, cloud_normals, cloud_surface, surface_for_map
+                       noise_level, surface_for_map)
+from ._cloud_surface import CloudSurface, cloud_normals, cloud_surface
 
 __all__ = [
     "CloudSurface", "ExamplePair", "FileRows", "JOINTS", "LABEL_NAMES", "LabelFile", "MainBody", "Mesh",

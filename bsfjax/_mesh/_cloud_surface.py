@@ -32,7 +32,7 @@ import scipy.sparse.csgraph as csgraph
 from .._util import BSFError
 from ._mesh import Mesh, PointCloud
 
-__all__ = ["cloud_normals", "cloud_surface", "surface_for_map", "CloudSurface", "SURFACE_NEIGHBORS"]
+__all__ = ["cloud_normals", "cloud_surface", "CloudSurface", "SURFACE_NEIGHBORS"]
 
 #: Neighbours per point for the normals and the tangent-plane fans.
 SURFACE_NEIGHBORS = 12
@@ -251,8 +251,3 @@ def cloud_surface(cloud, k: int = SURFACE_NEIGHBORS) -> CloudSurface:
     name = getattr(cloud, "name", None)
     return CloudSurface(pts, tris.astype(np.int64), name=name)
 
-
-def surface_for_map(mesh: Mesh) -> Mesh:
-    """What the map estimator gets as a shape's mesh: a point cloud's
-    [`cloud_surface`][bsfjax.cloud_surface], any other mesh itself."""
-    return cloud_surface(mesh) if mesh.is_point_cloud else mesh

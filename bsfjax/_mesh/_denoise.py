@@ -18,10 +18,12 @@ import scipy.sparse as sp
 from .._util import BSFError
 from ._graph import mesh_edges
 from ._cloud_denoise import cloud_noise_level, cloud_smooth
+from ._cloud_surface import cloud_surface
 from ._mesh import Mesh, PointCloud
 
 __all__ = ["denoise", "noise_level", "denoise_iterations", "as_strength", "auto_iterations", "NOISE_THRESHOLD", "TAUBIN_LAMBDA",
-           "TAUBIN_MU", "MAX_ITERATIONS", "CLOUD_NOISE_THRESHOLD", "mesh_threshold"]
+           "TAUBIN_MU", "MAX_ITERATIONS", "CLOUD_NOISE_THRESHOLD", "mesh_threshold",
+           "surface_for_map"]
 
 #: Taubin's pass band: a shrinking step ``λ`` then an inflating step ``μ < −λ``
 #: (pass-band frequency ``1/λ + 1/μ ≈ 0.1``).
@@ -186,3 +188,18 @@ def mesh_threshold(mesh: Mesh) -> float:
     """The noise level above which ``"auto"`` smooths ``mesh``: `NOISE_THRESHOLD`, or
     `CLOUD_NOISE_THRESHOLD` for a point cloud."""
     return CLOUD_NOISE_THRESHOLD if mesh.is_point_cloud else NOISE_THRESHOLD
+
+
+def surface_for_map(mesh: Mesh) -> Mesh:
+    """What the landmark-free map estimator gets as a shape's mesh (its orientation term,
+    geodesic distortions and orientation agreement): a point cloud's
+    [`cloud_surface`][bsfjax.cloud_surface], any other mesh itself.
+
+    The surface of a noisy cloud is built on its points smoothed by the mesh rule
+    (`auto_iterations` of its `noise_level`, threshold `NOISE_THRESHOLD`): Dijkstra paths
+    along its edges zig-zag with the noise and lengthen its geodesic distances, where the
+    spectrum (left on the points as given) tolerates the noise.  The vertices stay in the
+    cloud's order."""
+    if not mesh.is_point_cloud:
+        return mesh
+    return cloud_surface(denoise(mesh, auto_iterations(noise_level(mesh))))
