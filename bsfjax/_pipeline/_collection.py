@@ -174,6 +174,8 @@ def _bucket_key(t: _Target, pad: bool, orient: bool, n_samples: int | None,
                 merged: dict[int, tuple[int, int]]):
     n, m = t.mesh.n_vertices, t.mesh.n_faces
     n_b, m_b = merged.get(t.index, (size_bucket(n), size_bucket(m))) if pad else (n, m)
+    if pad and m > m_b:  # a cloud's stand-in surface: its triangles are made after the scan
+        m_b = size_bucket(m)
     m_b = m_b if orient else 0
     s_b = 0 if n_samples is None else min(n_samples, n_b)
     return n_b, m_b, 0 if t.landmarks is None else len(t.landmarks[0]), s_b
