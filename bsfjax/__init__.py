@@ -14,7 +14,8 @@ from ._util import BSFError, MeshError, VERSION
 
 # mesh
 from ._mesh import (
-    ExamplePair, FileRows, LabelFile, MainBody, Mesh, MeshReport, PointCloud, denoise,
+    ExamplePair, FileRows, LabelFile, MainBody, Mesh, MeshReport, PointCloud, cloud_normals,
+    cloud_surface, denoise,
     denoise_iterations, example_mesh, example_pair, load_labels, load_mesh, mesh_report,
     noise_level, save_labels, save_mesh, split_main_body, PreparedScan, prepare_scan,
     HoleFill, boundary_loops, fill_holes,
@@ -82,7 +83,8 @@ def view(source, targets=None, **options):
 __all__ = [
     "BSFError", "MeshError",
     # mesh
-    "Mesh", "FileRows", "MeshReport", "PointCloud", "as_mesh", "view", "load_mesh", "mesh_report", "save_mesh",
+    "Mesh", "FileRows", "MeshReport", "PointCloud", "as_mesh", "view", "cloud_normals", "cloud_surface",
+    "load_mesh", "mesh_report", "save_mesh",
     "MainBody", "split_main_body",
     "denoise", "denoise_iterations", "noise_level", "PreparedScan", "prepare_scan",
     "HoleFill", "boundary_loops", "fill_holes",

@@ -10,7 +10,8 @@ from ._util import (
     one_blas_thread, size_bucket, write_text_atomic,
 )
 from ._mesh import (
-    JOINTS, LABEL_NAMES, POSES, auto_iterations, clean_mesh, edge_graph, is_face_file,
+    CloudSurface, JOINTS, LABEL_NAMES, POSES, auto_iterations, clean_mesh, edge_graph, is_face_file,
+    mesh_threshold, surface_for_map,
     knn_edges, mesh_edges, sample_surface, subdivide, vertex_areas,
 )
 from ._spectral import (
@@ -28,7 +29,7 @@ from ._coding import (
     CODERS, as_coder,
 )
 from ._transfer import (
-    as_method, geodesic_ball_radii, product_basis,
+    CLOUD_DESCRIPTOR_WEIGHT, as_method, geodesic_ball_radii, method_for_shapes, product_basis,
 )
 from ._pipeline import (
     FaceShares, decide_face_labels, face_label_shares, face_scores,
@@ -56,4 +57,6 @@ __all__ = [
     "run_demo", "sample_surface", "size_bucket", "sparse_atoms", "sparse_gram", "subdivide",
     "unique_atoms", "vertex_areas", "wks_energies", "write_text_atomic",
 ]
+__all__ += ["CLOUD_DESCRIPTOR_WEIGHT", "CloudSurface", "method_for_shapes", "mesh_threshold",
+            "surface_for_map"]
 __all__ += ["available_memory", "capped_batch", "check_fmap_memory", "check_path_clashes"]

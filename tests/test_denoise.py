@@ -73,7 +73,7 @@ def test_strength_checked(sphere):
         bsfjax.denoise(sphere, -1)
     assert bsfjax.denoise(sphere, 0) is sphere
     cloud = bsfjax.PointCloud(sphere.vertices)
-    assert bsfjax.noise_level(cloud) == 0 and bsfjax.denoise(cloud) is cloud
+    assert bsfjax.noise_level(cloud) < 0.1 and bsfjax.denoise(cloud) is cloud  # ("auto": kept)
 
 
 def test_keeps_file_rows(tmp_path, sphere):

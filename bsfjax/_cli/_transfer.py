@@ -99,10 +99,6 @@ def _transfer_one(args) -> int:
     if src_parts.n_other_components:  # their labels are not carried
         print(f"source: {src_parts.other.size} vertices in {src_parts.n_other_components} other "
               "components left out (its main body is matched)", file=sys.stderr)
-    for shape, role in ((source, "source"), (target, "target")):
-        if shape.is_point_cloud and kind == "estimate" and landmarks is None:
-            raise CLIError(f"{shape.name}: a point cloud {role} needs --landmarks: the "
-                           "landmark-free map's orientation term needs triangles")
     if landmarks is not None:
         from .._util import check_indices
 
@@ -180,8 +176,13 @@ def _transfer_one(args) -> int:
                           "mirror image or turned front to back (an orientation term and a choice "
                           "among several starts make it less likely; two landmark pairs remove "
                           "it)", stacklevel=1)
+        from .._mesh import surface_for_map
+
+        # without landmarks a point cloud gives the orientation term its stand-in surface
+        shapes = ((source, target) if landmarks is not None else
+                  (surface_for_map(source), surface_for_map(target)))
         est = map_estimator(args, k, k_map)(sm.truncate(k_map), sn.truncate(k_map), landmarks,
-                                            source_mesh=source, target_mesh=target)
+                                            source_mesh=shapes[0], target_mesh=shapes[1])
         C, p2p = est.C, est.p2p
         print(f"estimated a {k}x{k} map (ZoomOut to {k_map})", file=sys.stderr)
         if est.start is not None:
@@ -193,7 +194,11 @@ def _transfer_one(args) -> int:
                   f"orientation agreement {est.orientation:.1%}", file=sys.stderr)
             if est.turn_doubtful:
                 warnings.warn(TURN_DOUBT, stacklevel=1)
-    common = dict(C=C, p2p=p2p, method=args.method, mesh=source)
+    from .._transfer import method_for_shapes
+
+    # a pair with a point cloud: the refined continuation without the WKS descriptors
+    common = dict(C=C, p2p=p2p, method=method_for_shapes(args.method, source, target),
+                  mesh=source)
     on_whole = False  # the result on the whole target (main body and other components)
     if args.method == "refined":  # its continuation runs on the samples of the map's ZoomOut
         from .._sampling import subsample

@@ -3,9 +3,9 @@
 `Mesh` (vertices, triangles, or none: a `PointCloud`, cleaning of unreferenced vertices and degenerate faces, areas,
 edges, components), reading and writing mesh files (OFF, PLY, OBJ, STL, ... through meshio,
 with fast paths for plain OFF/PLY), segmentation files (`.txt` / `.npy`, SMPL's `.json`,
-per-triangle `.seg`), loop subdivision, denoising (Taubin smoothing with a strength from a noise estimate), a scan's preparation
+per-triangle `.seg`), loop subdivision, denoising (Taubin smoothing with a strength from a noise estimate; of point clouds too), a scan's preparation
 for its spectrum (`prepare_scan`: main body, then denoised, then its holes closed), the built-in
-example pair, and meshes from trimesh, pyFM, open3d or ``(V, F)`` arrays (`as_mesh`).
+example pair, a point cloud's oriented stand-in surface (`cloud_surface`), and meshes from trimesh, pyFM, open3d or ``(V, F)`` arrays (`as_mesh`).
 """
 
 from ._example import ExamplePair, JOINTS, LABEL_NAMES, POSES, example_mesh, example_pair
@@ -19,14 +19,17 @@ from ._readers import load_mesh
 from ._interop import as_mesh, is_mesh_like
 from ._mesh_write import save_mesh
 from ._subdivision import subdivide
-from ._denoise import as_strength, auto_iterations, denoise, denoise_iterations, noise_level
+from ._denoise import (as_strength, auto_iterations, denoise, denoise_iterations, mesh_threshold,
+                       noise_level, surface_for_map)
+from ._cloud_surface import CloudSurface, cloud_normals, cloud_surface
 from ._holes import HoleFill, boundary_loops, fill_holes
 from ._scan import PreparedScan, prepare_scan
 
 __all__ = [
-    "ExamplePair", "FileRows", "HoleFill", "JOINTS", "LABEL_NAMES", "LabelFile", "MainBody", "Mesh",
-    "MeshReport", "POSES", "PointCloud", "PreparedScan", "as_mesh", "as_strength", "auto_iterations",
-    "boundary_loops", "clean_mesh", "fill_holes", "is_mesh_like",
+    "CloudSurface", "ExamplePair", "FileRows", "HoleFill", "JOINTS", "LABEL_NAMES", "LabelFile",
+    "MainBody", "Mesh", "MeshReport", "POSES", "PointCloud", "PreparedScan", "as_mesh",
+    "as_strength", "auto_iterations", "boundary_loops", "clean_mesh", "cloud_normals",
+    "cloud_surface", "fill_holes", "is_mesh_like", "mesh_threshold", "surface_for_map",
     "denoise", "denoise_iterations", "edge_graph", "example_mesh", "example_pair",
     "graph_from_edges", "is_face_file", "knn_edges", "load_labels", "load_mesh", "mesh_edges",
     "mesh_report", "n_components", "noise_level", "prepare_scan", "read_label_file", "sample_surface",

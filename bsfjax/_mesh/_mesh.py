@@ -318,9 +318,12 @@ class PointCloud(Mesh):
     [`spectrum`][bsfjax.spectrum] use the point-cloud Laplacian of Sharp & Crane 2020
     (robust-laplacian's ``point_cloud_laplacian``; its mass is a lumped area per point);
     geodesic distances and ``"geodesic"`` farthest point sampling run Dijkstra on the
-    symmetrized k-nearest-neighbour graph (`bsfjax.internal.edge_graph`).  What
-    needs triangles refuses with a line that says so: the landmark-free map (its orientation
-    term), per-triangle labels, the heat method, subdivision.
+    symmetrized k-nearest-neighbour graph (`bsfjax.internal.edge_graph`).  The
+    landmark-free map runs on its stand-in surface ([`cloud_surface`][bsfjax.cloud_surface],
+    which `bsfjax transfer` and [`transfer_collection`][bsfjax.transfer_collection] build;
+    [`estimate_map`][bsfjax.estimate_map] given the cloud itself without landmarks refuses).
+    What needs triangles refuses with a line that says so: per-triangle labels, the heat
+    method, subdivision.
     """
 
     _POINTS = True

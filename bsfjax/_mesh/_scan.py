@@ -18,7 +18,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ._components import MainBody, split_main_body
-from ._denoise import as_strength, auto_iterations, denoise, denoise_iterations, noise_level
+from ._denoise import (as_strength, auto_iterations, denoise, denoise_iterations, mesh_threshold,
+                       noise_level)
 from ._holes import HoleFill, fill_holes as _fill
 from ._mesh import Mesh
 from ._interop import as_mesh
@@ -132,7 +133,7 @@ def prepare_scan(mesh: Mesh, denoise_strength=True, fill_holes=True) -> Prepared
     level = None
     if strength == "auto":
         level = noise_level(parts.mesh)  # once: the iterations follow from it
-        n_it = auto_iterations(level)
+        n_it = auto_iterations(level, mesh_threshold(parts.mesh))  # (a cloud: none)
     else:
         n_it = denoise_iterations(parts.mesh, strength)
     body = denoise(parts.mesh, n_it)

@@ -59,7 +59,7 @@ from ._collection_rows import (body_result, collection_estimator, file_row_resul
                                whole_result)
 from .._metrics import labels_to_indicators
 from .._mesh import (HoleFill, MainBody, Mesh, as_mesh, as_strength, is_mesh_like, load_mesh,
-                     prepare_scan)
+                     prepare_scan, surface_for_map)
 from .._transfer import BSF, GeodesicBalls, SaturatedHeat, as_method, method_name
 from .._maps import REFINE_EIGENPAIRS
 from .._sampling import Subsample, subsample
@@ -181,6 +181,8 @@ def _bucket_key(t: _Target, pad: bool, orient: bool, n_samples: int | None,
                 merged: dict[int, tuple[int, int]]):
     n, m = t.mesh.n_vertices, t.mesh.n_faces
     n_b, m_b = merged.get(t.index, (size_bucket(n), size_bucket(m))) if pad else (n, m)
+    if pad and m > m_b:  # a cloud's stand-in surface: its triangles are made after the scan
+        m_b = size_bucket(m)
     m_b = m_b if orient else 0
     s_b = 0 if n_samples is None else min(n_samples, n_b)
     return n_b, m_b, 0 if t.landmarks is None else len(t.landmarks[0]), s_b
@@ -314,7 +316,9 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     src_unit, a0 = unit_area(src_spec)
     rep = {"evals": np.asarray(src_unit.evals), "evecs": np.asarray(src_unit.evecs),
            "mass": np.asarray(src_unit.mass), "F": F}
-    geom_src = face_geometry(source)
+    # a point cloud's stand-in surface for the orientation term and the choice among starts
+    src_geometry = surface_for_map(source)
+    geom_src = face_geometry(src_geometry)
     rep_orient = {"faces": geom_src.faces, "K": geom_src.K, "third_area": geom_src.third_area}
     if isinstance(method, (BSF, GeodesicBalls, SaturatedHeat)):
         from .._sampling import farthest_point_sampling
@@ -343,7 +347,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     def source_symmetry():
         if not symmetry:
-            symmetry.append(estimator.mirror_symmetry(src_spec.truncate(k_map), source,
+            symmetry.append(estimator.mirror_symmetry(src_spec.truncate(k_map), src_geometry,
                                                       samples=sub_m))
         return symmetry[0]
 
@@ -356,12 +360,17 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         if mesh.n_vertices <= k_spec:
             raise BSFError(f"{mesh.name or f'target {i}'}: {mesh.n_vertices} vertices, too few "
                            f"for {k_spec} eigenpairs")
+        if faces and mesh.is_point_cloud:
+            raise BSFError(f"{mesh.name or f'target {i}'}: per-triangle labels need a triangle "
+                           "target; a point cloud has none")
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
+        if lm is None:  # (the orientation term's triangles: a point cloud's stand-in surface)
+            mesh = surface_for_map(mesh)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
         est = None
         if lm is None and not one_start:  # the choice among starts: the estimator's own map
-            est = estimator(src_spec.truncate(k_map), spec.truncate(k_map), source_mesh=source,
+            est = estimator(src_spec.truncate(k_map), spec.truncate(k_map), source_mesh=src_geometry,
                             target_mesh=mesh, samples=None if sub is None else (sub_m, sub),
                             source_symmetry=source_symmetry())
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,

@@ -15,10 +15,11 @@ from ._baselines import (
 from ._bsf import AbstractMethod, BSF, PAPER_GAMMA, PAPER_TAUS, Pair
 from ._methods import CODER_NAMES, METHODS, as_method, method_name
 from ._refined import RefinedPullBack
+from ._cloud_method import CLOUD_DESCRIPTOR_WEIGHT, method_for_shapes
 
 __all__ = [
-    "AbstractMethod", "BSF", "CODER_NAMES", "GeodesicBalls", "METHODS", "PAPER_GAMMA",
+    "AbstractMethod", "BSF", "CLOUD_DESCRIPTOR_WEIGHT", "CODER_NAMES", "GeodesicBalls", "METHODS", "PAPER_GAMMA",
     "PAPER_TAUS", "Pair", "ProductBasis", "PullBack", "RefinedPullBack",
     "SaturatedHeat", "SpectralProjection", "TransferResult", "as_method", "geodesic_ball_radii",
-    "method_name", "product_basis", "saturate", "stack_pairs", "transfer", "transfer_pairs",
+    "method_for_shapes", "method_name", "product_basis", "saturate", "stack_pairs", "transfer", "transfer_pairs",
 ]

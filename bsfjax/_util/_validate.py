@@ -144,7 +144,7 @@ def check_source_mesh(mesh, n_vertices: int, mass, name: str = "mesh",
                        f"{name}= must be the {role} mesh")
     if not hasattr(mesh, "faces") or mass is None or is_traced(mass):
         return
-    if getattr(mesh, "is_point_cloud", False):
+    if getattr(mesh, "is_point_cloud", False) or getattr(mesh, "from_cloud", False):
         return  # (its area is the Laplacian's lumped area: the count check is what is cheap)
     v = np.asarray(mesh.vertices, np.float64)
     f = np.asarray(mesh.faces)
