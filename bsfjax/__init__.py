@@ -19,6 +19,7 @@ from ._mesh import (
     noise_level, save_labels, save_mesh, split_main_body, PreparedScan, prepare_scan,
     HoleFill, boundary_loops, fill_holes,
 )
+from ._mesh import as_mesh
 
 # operators and spectrum
 from ._spectral import (
@@ -63,10 +64,25 @@ from ._metrics import (indicators_to_labels, labels_to_indicators, missing_label
 
 __version__ = VERSION
 
+
+def view(source, targets=None, **options):
+    """Open the polyscope viewer: [`bsfjax.plot.view`][bsfjax.plot.view] (same arguments),
+    imported on the first call, so that ``import bsfjax`` loads neither matplotlib nor
+    polyscope.
+
+    **Arguments:**
+
+    - `source`, `targets`, `options`: as [`bsfjax.plot.view`][bsfjax.plot.view].
+    """
+    from ._plot import view as _view
+
+    return _view(source, targets, **options)
+
+
 __all__ = [
     "BSFError", "MeshError",
     # mesh
-    "Mesh", "FileRows", "MeshReport", "PointCloud", "load_mesh", "mesh_report", "save_mesh",
+    "Mesh", "FileRows", "MeshReport", "PointCloud", "as_mesh", "view", "load_mesh", "mesh_report", "save_mesh",
     "MainBody", "split_main_body",
     "denoise", "denoise_iterations", "noise_level", "PreparedScan", "prepare_scan",
     "HoleFill", "boundary_loops", "fill_holes",

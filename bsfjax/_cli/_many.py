@@ -368,6 +368,11 @@ def _write_target(args, run: _Run, i: int, res, part_names, per_face: bool, erro
         with atomic_path(out, immediate=True) as tmp:
             np.savetxt(tmp, result, fmt="%.8g")
     run.write_manifest(i, rec)
+    if args.render:  # PNGs of the source and the result (bsfjax.plot.render)
+        from ._view import render_run
+
+        render_run(args, path, result, part_names, per_face,
+                   _truth_path(args.truth_dir, path.stem))
     return rec
 
 

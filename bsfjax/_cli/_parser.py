@@ -8,11 +8,12 @@ from pathlib import Path
 from ._commands import _cmd_demo, _cmd_example, _cmd_spectrum
 from ._io import CLIError
 from ._transfer import _cmd_transfer
+from ._view import add_view_parser, check_render_available
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The `argparse` parser of the `bsfjax` command, with one sub-command each for `demo`,
-    `example`, `transfer`, `reproduce` and `spectrum`."""
+    `example`, `transfer`, `view`, `reproduce` and `spectrum`."""
     from .._util import VERSION
 
     parser = argparse.ArgumentParser(
@@ -76,6 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "heat")
     p.add_argument("--mesh-out", help="also write the target mesh coloured by the result (.ply)")
     p.add_argument("--mesh-out-dir", help="--out-dir: also write DIR/<target name>.ply coloured")
+    p.add_argument("--render", metavar="DIR", help="also render each target's result next to the "
+                   "source to DIR/<target name>_front.png and _back.png (polyscope, headless)")
     p.add_argument("--threshold", type=float, default=None,
                    help="labels: a target vertex whose best score is below this is unassigned (-1) "
                         "(default 0.5; 0 for 'p2p' and 'refined', whose scores are shares)")
@@ -99,6 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "to start (default 90): an unreachable coordinator or a missing process is "
                    "then one error line")
     p.set_defaults(func=_cmd_transfer)
+
+    add_view_parser(sub)
 
     p = sub.add_parser("spectrum", help="compute the Laplace-Beltrami spectrum of a mesh")
     p.add_argument("mesh", help="mesh file (OFF, PLY, OBJ, STL, ...)")
@@ -202,6 +207,8 @@ def _check_options(args) -> None:
     cmd = args.command
     if cmd == "transfer":
         _check_transfer_form(args)
+        if args.render:
+            check_render_available()
         t = args.threshold
         if t is not None and not 0 <= t < 1:  # nan fails both comparisons
             raise CLIError(f"--threshold must be a number in [0, 1), got {t!r}")

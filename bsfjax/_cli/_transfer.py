@@ -252,6 +252,10 @@ def _transfer_one(args) -> int:
         save_mesh(args.mesh_out, target.file_mesh(),  # (the geometry as read: parts.whole)
                   **({"cell_data": coloured} if per_face else {"point_data": coloured}))
     _write_array(args.out, result, names)
+    if args.render:  # PNGs of the source and the result (bsfjax.plot.render)
+        from ._view import render_run
+
+        render_run(args, args.target, result, names, per_face, args.truth)
     print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else "")
           + dropped_note(target, per_face), file=sys.stderr)
     return 0

@@ -46,6 +46,7 @@ from .._sampling import geodesic_distances
 from .._mesh import Mesh
 from .._sampling import farthest_point_sampling
 from .._util import check_indices, check_int, check_real, require_triangles
+from .._mesh import as_mesh
 
 __all__ = ["map_distortion", "orientation_agreement", "choose_map", "DISTORTION_SAMPLES",
            "ORIENTATION_SLACK"]
@@ -93,6 +94,8 @@ def map_distortion(source_mesh: Mesh, target_mesh: Mesh, p2p, *,
     a float (or ``(B,)`` floats), 0 for an isometry; in units of √area, or a
     ratio with a ``radius``.
     """
+    source_mesh, target_mesh = as_mesh(source_mesh, "source_mesh"), as_mesh(target_mesh,
+                                                                            "target_mesh")
     maps, single = _check_pair(source_mesh, target_mesh, p2p)
     n_samples = check_int(n_samples, "n_samples", 2)
     if radius is not None:
@@ -187,6 +190,8 @@ def orientation_agreement(source_mesh: Mesh, target_mesh: Mesh, p2p):
     a float (or ``(B,)``) in [0, 1]: 1 for a map that keeps every triangle's
     orientation, 0 for a mirror image; faces whose three images are not distinct do not count.
     """
+    source_mesh, target_mesh = as_mesh(source_mesh, "source_mesh"), as_mesh(target_mesh,
+                                                                            "target_mesh")
     maps, single = _check_pair(source_mesh, target_mesh, p2p)
     for m in (source_mesh, target_mesh):
         require_triangles(m, "the orientation agreement needs triangles: a point cloud has "

@@ -24,6 +24,7 @@ from .._sampling import Subsample, subsample
 from .._spectral import Spectrum, unit_area_pair
 from .._util import (BSFError, check_int, check_real, check_source_mesh, on_one_blas_thread,
                      require_triangles)
+from .._mesh import as_mesh
 
 __all__ = ["MapEstimate", "MapEstimator", "estimate_map", "mirror_symmetry"]
 
@@ -412,6 +413,8 @@ def estimate_map(source: Spectrum, target: Spectrum, *, k: int = _DEFAULT.k, lan
 
     a [`MapEstimate`][bsfjax.MapEstimate].
     """
+    source_mesh, target_mesh = (None if m is None else as_mesh(m, w) for m, w in
+                                ((source_mesh, "source_mesh"), (target_mesh, "target_mesh")))
     given = isinstance(zoomout_samples, tuple)
     estimator = MapEstimator(
         k=k, refine_to=refine_to, n_energies=n_energies,
@@ -447,6 +450,7 @@ def mirror_symmetry(spectrum: Spectrum, mesh, *, k: int = _DEFAULT.k,
     ``(n,)`` int array, ``S[i]`` the mirror image of vertex ``i`` (with ``rows``,
     ``(len(rows),)``: the image of ``rows[i]``).
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     given = isinstance(samples, Subsample)
     estimator = MapEstimator(k=k, refine_to=refine_to, n_energies=n_energies,
                              zoomout_samples=None if given else samples,

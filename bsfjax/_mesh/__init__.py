@@ -4,17 +4,19 @@
 edges, components), reading and writing mesh files (OFF, PLY, OBJ, STL, ... through meshio,
 with fast paths for plain OFF/PLY), segmentation files (`.txt` / `.npy`, SMPL's `.json`,
 per-triangle `.seg`), loop subdivision, denoising (Taubin smoothing with a strength from a noise estimate), a scan's preparation
-for its spectrum (`prepare_scan`: main body, then denoised, then its holes closed), and the built-in example pair.
+for its spectrum (`prepare_scan`: main body, then denoised, then its holes closed), the built-in example pair, and meshes from trimesh, pyFM, open3d or
+``(V, F)`` arrays (`as_mesh`).
 """
 
 from ._example import ExamplePair, JOINTS, LABEL_NAMES, POSES, example_mesh, example_pair
-from ._label_files import LabelFile, is_face_file, load_labels, read_label_file, save_labels
+from ._label_files import UNASSIGNED_PART, LabelFile, is_face_file, load_labels, read_label_file, save_labels
 from ._clean import MeshReport, clean_mesh, mesh_report
 from ._graph import edge_graph, graph_from_edges, knn_edges, mesh_edges, n_components
 from ._points import sample_surface
 from ._components import MainBody, split_main_body, vertex_areas
 from ._mesh import FileRows, Mesh, PointCloud
 from ._readers import load_mesh
+from ._interop import as_mesh, is_mesh_like
 from ._mesh_write import save_mesh
 from ._subdivision import subdivide
 from ._denoise import as_strength, auto_iterations, denoise, denoise_iterations, noise_level
@@ -23,9 +25,9 @@ from ._scan import PreparedScan, prepare_scan
 
 __all__ = [
     "ExamplePair", "FileRows", "HoleFill", "boundary_loops", "fill_holes", "JOINTS", "LABEL_NAMES", "LabelFile", "MainBody", "Mesh",
-    "MeshReport", "POSES", "PointCloud", "PreparedScan", "as_strength", "auto_iterations", "clean_mesh",
+    "MeshReport", "POSES", "PointCloud", "PreparedScan", "as_mesh", "as_strength", "is_mesh_like", "auto_iterations", "clean_mesh",
     "denoise", "denoise_iterations", "edge_graph", "example_mesh", "example_pair",
     "graph_from_edges", "is_face_file", "knn_edges", "load_labels", "load_mesh", "mesh_edges",
     "mesh_report", "n_components", "noise_level", "prepare_scan", "read_label_file", "sample_surface",
-    "save_labels", "save_mesh", "split_main_body", "subdivide", "vertex_areas",
+    "UNASSIGNED_PART", "save_labels", "save_mesh", "split_main_body", "subdivide", "vertex_areas",
 ]

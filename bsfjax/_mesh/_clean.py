@@ -14,6 +14,7 @@ import numpy as np
 from .._util import MeshError
 from ._graph import mesh_edges, n_components
 from ._mesh import FileRows, Mesh
+from ._interop import as_mesh
 
 __all__ = ["MeshReport", "mesh_report", "clean_mesh"]
 
@@ -62,6 +63,7 @@ def mesh_report(mesh: "Mesh") -> MeshReport:
     points and no edges to be non-manifold or on a boundary (all 0); its duplicate points are
     counted, and its components are those of its k-nearest-neighbour graph.
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     if not isinstance(mesh, Mesh):
         raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
     f = mesh.faces

@@ -18,6 +18,7 @@ import scipy.sparse.csgraph
 from .._util import MeshError
 from ._graph import mesh_edges
 from ._mesh import FileRows, Mesh
+from ._interop import as_mesh
 
 __all__ = ["MainBody", "MIN_SHARE", "REACH", "split_main_body", "vertex_areas"]
 
@@ -32,6 +33,7 @@ REACH = 4.0
 def vertex_areas(mesh: Mesh) -> np.ndarray:
     """``(n,)`` barycentric vertex areas: a third of the area of every incident triangle
     (zero on a vertex no triangle uses)."""
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     third = np.repeat(mesh.face_areas() / 3.0, 3)
     return np.bincount(mesh.faces.ravel(), weights=third, minlength=mesh.n_vertices)
 
@@ -157,6 +159,7 @@ def split_main_body(mesh: Mesh, min_share: float = MIN_SHARE, reach: float = REA
     A [`MainBody`][bsfjax.MainBody]; with one component (or a point cloud) its ``mesh`` is
     ``mesh`` itself and nothing is left out.
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     if not isinstance(mesh, Mesh):
         raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
     n = mesh.n_vertices

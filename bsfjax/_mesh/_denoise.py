@@ -18,6 +18,7 @@ import scipy.sparse as sp
 from .._util import BSFError
 from ._graph import mesh_edges
 from ._mesh import Mesh
+from ._interop import as_mesh
 
 __all__ = ["denoise", "noise_level", "denoise_iterations", "as_strength", "auto_iterations", "NOISE_THRESHOLD", "TAUBIN_LAMBDA",
            "TAUBIN_MU", "MAX_ITERATIONS"]
@@ -78,6 +79,7 @@ def noise_level(mesh: Mesh) -> float:
 
     - `mesh`: a [`Mesh`][bsfjax.Mesh].
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     if mesh.is_point_cloud or mesh.n_faces == 0:
         return 0.0
     W = _umbrella(mesh)
@@ -117,6 +119,7 @@ def denoise(mesh: Mesh, strength="auto") -> Mesh:
     **Returns:** a [`Mesh`][bsfjax.Mesh] (``mesh`` itself when nothing is smoothed); the
     iterations it runs are [`denoise_iterations(mesh, strength)`][bsfjax.denoise_iterations].
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     n_iter = denoise_iterations(mesh, strength)
     if n_iter == 0:
         return mesh
@@ -147,6 +150,7 @@ def denoise_iterations(mesh: Mesh, strength="auto") -> int:
     - `mesh`: a [`Mesh`][bsfjax.Mesh].
     - `strength`: as for [`denoise`][bsfjax.denoise].
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     if mesh.is_point_cloud or mesh.n_faces == 0:
         return 0
     if isinstance(strength, str):

@@ -286,6 +286,19 @@ class Mesh:
         f[np.setdiff1d(np.arange(fr.n_faces), fids)] = fr.dropped_faces
         return Mesh(v, f, name=self.name)
 
+    def to_trimesh(self):
+        """The mesh as a ``trimesh.Trimesh`` (same vertices and triangles, in order; nothing
+        merged: ``process=False``; a point cloud: a ``trimesh.PointCloud``); needs trimesh
+        (``pip install trimesh``)."""
+        try:
+            import trimesh
+        except ImportError:
+            raise MeshError("Mesh.to_trimesh needs trimesh: pip install trimesh") from None
+        if self.is_point_cloud:
+            return trimesh.PointCloud(np.array(self.vertices))
+        return trimesh.Trimesh(vertices=np.array(self.vertices), faces=np.array(self.faces),
+                               process=False)
+
     def __repr__(self) -> str:
         name = f", name={self.name!r}" if self.name else ""
         return f"Mesh(n_vertices={self.n_vertices}, n_faces={self.n_faces}{name})"

@@ -13,6 +13,7 @@ import numpy as np
 from .._util import BSFError, MeshError
 from .._util import atomic_path
 from ._mesh import Mesh
+from ._interop import as_mesh
 
 __all__ = ["save_mesh"]
 
@@ -47,6 +48,7 @@ def save_mesh(path: str | os.PathLike, mesh: Mesh, point_data: dict | None = Non
     face colours.  ``immediate``: as `bsfjax._util._files.atomic_path` (in place at once, even
     inside an output transaction).
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     import meshio
 
     if not isinstance(mesh, Mesh):

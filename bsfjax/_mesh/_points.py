@@ -7,6 +7,7 @@ import numpy as np
 
 from .._util import BSFError
 from ._mesh import Mesh
+from ._interop import as_mesh
 
 __all__ = ["sample_surface"]
 
@@ -15,6 +16,7 @@ def sample_surface(mesh: Mesh, n: int, seed: int = 0) -> tuple[np.ndarray, np.nd
     """``n`` points drawn uniformly by area from ``mesh``'s triangles, deterministically from
     ``seed``: ``(points (n, 3), face (n,), barycentric (n, 3))``, each point
     ``Σ_c barycentric[:, c] · vertices[faces[face, c]]``."""
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     if mesh.is_point_cloud:
         raise BSFError("sample_surface needs a triangle mesh (a point cloud has no surface)")
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:

@@ -21,6 +21,7 @@ from ._components import MainBody, split_main_body
 from ._denoise import as_strength, auto_iterations, denoise, denoise_iterations, noise_level
 from ._holes import HoleFill, fill_holes as _fill
 from ._mesh import Mesh
+from ._interop import as_mesh
 
 #: A hole whose patch would cover more than this share of the mesh's area (``π ρ²``, ``ρ`` the
 #: loop's mean distance to its centroid) is left open: an open half-scan, not a hole.
@@ -125,6 +126,7 @@ def prepare_scan(mesh: Mesh, denoise_strength=True, fill_holes=True) -> Prepared
 
     **Returns:** a [`PreparedScan`][bsfjax.PreparedScan].
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     parts = split_main_body(mesh)
     strength = as_strength(denoise_strength)
     level = None

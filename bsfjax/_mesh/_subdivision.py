@@ -13,6 +13,7 @@ import scipy.sparse as sp
 from .._util import BSFError, require_triangles
 from ._graph import mesh_edges
 from ._mesh import Mesh
+from ._interop import as_mesh
 
 __all__ = ["subdivide"]
 
@@ -74,6 +75,7 @@ def subdivide(mesh: Mesh, scheme: str = "loop", levels: int = 1) -> Mesh:
     result is the (moved, for Loop) vertex ``i`` of the input, so per-vertex correspondences of
     the coarse mesh carry over to the first ``n`` vertices.
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     require_triangles(mesh, "a point cloud cannot be subdivided: subdivision splits triangles")
     if scheme not in ("loop", "midpoint"):
         raise BSFError(f"scheme must be 'loop' or 'midpoint', got {scheme!r}")

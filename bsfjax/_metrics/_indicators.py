@@ -33,6 +33,7 @@ import scipy.sparse.csgraph
 from .._util import BSFError
 from .._spectral import laplacian
 from .._mesh import Mesh, graph_from_edges, mesh_edges
+from .._mesh import as_mesh
 
 __all__ = ["random_indicators", "labels_to_indicators", "indicators_to_labels"]
 
@@ -83,6 +84,7 @@ def random_indicators(mesh: Mesh, count: int, seed: int = 0, area_fraction=(0.05
 
     ``(count, n)`` float64 numpy array.
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     if not isinstance(mesh, Mesh):
         raise BSFError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
     if isinstance(count, (bool, np.bool_)) or not isinstance(count, numbers.Integral) or count < 1:

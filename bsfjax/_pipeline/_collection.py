@@ -58,7 +58,8 @@ from ._collection_rows import (body_result, collection_estimator, file_row_resul
                                landmark_lookup, missing_parts, on_body, source_values,
                                whole_result)
 from .._metrics import labels_to_indicators
-from .._mesh import HoleFill, MainBody, Mesh, as_strength, load_mesh, prepare_scan
+from .._mesh import (HoleFill, MainBody, Mesh, as_mesh, as_strength, is_mesh_like, load_mesh,
+                      prepare_scan)
 from .._transfer import BSF, GeodesicBalls, SaturatedHeat, as_method, method_name
 from .._maps import REFINE_EIGENPAIRS
 from .._sampling import Subsample, subsample
@@ -134,7 +135,7 @@ class _Target(NamedTuple):
 def _as_mesh(target) -> Mesh:
     if isinstance(target, Mesh):
         return target
-    return load_mesh(target)
+    return as_mesh(target) if is_mesh_like(target) else load_mesh(target)
 
 
 def _merged_sizes(targets: list, lm_of, keep: dict[int, Mesh] | None = None,

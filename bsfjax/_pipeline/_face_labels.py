@@ -34,6 +34,7 @@ from .._mesh import Mesh
 from .._metrics import missing_labels
 from .._spectral import Spectrum
 from .._util import check_source_mesh, compact_labels, require_triangles
+from .._mesh import as_mesh
 
 __all__ = ["FaceShares", "face_label_shares", "face_scores", "transfer_face_labels",
            "decide_face_labels", "face_labels_from_vertices"]
@@ -93,6 +94,7 @@ def face_labels_from_vertices(mesh: Mesh, labels: Int[ArrayLike, " n"]) -> np.nd
     """``(m,)`` labels of the triangles from ``(n,)`` labels of the vertices: each triangle
     takes the label of the majority of its corners (of its first corner when all three differ),
     e.g. to write a vertex segmentation as a ``.seg`` file."""
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     a, b, c = _one_per(mesh, labels, "labels", "vertex")[mesh.faces].T
     return np.where((b == c) & (a != b), b, a)  # else a equals b or c, or all three differ
 
@@ -132,6 +134,8 @@ def transfer_face_labels(source: Spectrum, target: Spectrum, face_labels: Int[Ar
     at every border whatever the map, so they say nothing of how sure the transfer is, and
     the regime of ``"refined"`` comes from the agreement alone.
     """
+    source_mesh, target_mesh = as_mesh(source_mesh, "source_mesh"), as_mesh(target_mesh,
+                                                                            "target_mesh")
     for mesh, spec, role in ((source_mesh, source, "source"), (target_mesh, target, "target")):
         if not isinstance(mesh, Mesh):
             raise BSFError(f"{role}_mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")

@@ -23,6 +23,7 @@ from .._spectral import Spectrum
 from .._util import on_one_blas_thread
 from .._util import check_finite, check_indices, check_source_mesh, compact_labels
 from .._util import homogeneous, pow2_scale
+from .._mesh import as_mesh
 
 __all__ = ["transfer_values", "transfer_labels", "LabelTransfer", "REGIMES"]
 
@@ -63,6 +64,7 @@ def transfer_values(source: Spectrum, target: Spectrum,
     float64 magnitude (1e300) are computed at unit scale on the host and scaled back in
     float64, never returned as inf or NaN.  Complex values are refused.
     """
+    mesh = None if mesh is None else as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F)
     method = as_method(method, **options)
     f = _real_array(values, "values")
     single = f.ndim == 1

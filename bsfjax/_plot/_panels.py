@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 
 from .._util import atomic_path
 from .._util import BSFError
-from .._mesh import Mesh
+from .._mesh import Mesh, as_mesh
 from ._scene import Scene
 
 __all__: list[str] = []
@@ -45,9 +45,7 @@ class _Figure(Figure):
 
 
 def _check_mesh(mesh) -> Mesh:
-    if not isinstance(mesh, Mesh):
-        raise BSFError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
-    return mesh
+    return as_mesh(mesh)  # a Mesh, or trimesh, pyFM, open3d, (V, F); else a one-line error
 
 
 def _per_vertex(name: str, values, mesh: Mesh, *, allow_faces: bool = False,

@@ -35,7 +35,7 @@ import scipy.sparse.csgraph
 
 from .._util import size_bucket
 from .._util import BSFError
-from .._mesh import Mesh, edge_graph
+from .._mesh import Mesh, as_mesh, edge_graph, is_mesh_like
 from .._spectral import Spectrum
 from .._util import pow2_scale
 
@@ -167,6 +167,7 @@ def _fps_geodesic(graph: sp.csr_matrix, first: int, n: int) -> np.ndarray:
 
 
 def _as_points(mesh) -> np.ndarray:
+    mesh = as_mesh(mesh) if is_mesh_like(mesh) else mesh  # trimesh, pyFM, open3d, (V, F)
     if isinstance(mesh, Mesh):
         return mesh.vertices
     if isinstance(mesh, jax.core.Tracer):
@@ -233,6 +234,7 @@ def farthest_point_sampling(mesh, n, metric: str = "euclidean", seed: int = 0,
         raise BSFError(f"metric must be one of {_METRICS}, got {metric!r}")
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral) or seed < 0:
         raise BSFError(f"seed must be a non-negative int, got {seed!r}")
+    mesh = as_mesh(mesh) if is_mesh_like(mesh) else mesh  # trimesh, pyFM, open3d, (V, F)
     points = _as_points(mesh)
     n_points = points.shape[0]
     count = n_samples(n, n_points)

@@ -34,6 +34,7 @@ import scipy.sparse.linalg
 from .._util import BSFError, require_triangles
 from .._spectral import laplacian
 from .._mesh import Mesh, edge_graph, mesh_edges
+from .._mesh import as_mesh
 
 __all__ = ["geodesic_distances", "geodesic_error", "GEODESIC_METHODS"]
 
@@ -181,6 +182,7 @@ def geodesic_distances(mesh: Mesh, sources, *, method: str = "dijkstra",
 
     ``method`` is ``"dijkstra"`` (edge graph) or ``"heat"`` (heat method); see the module doc.
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     _check_mesh(mesh)
     _check_method(method)
     chunk = _check_chunk(chunk_size)
@@ -218,6 +220,7 @@ def geodesic_error(source_mesh: Mesh, p2p, gt_p2p, *, method: str = "dijkstra",
     ``mean_i d_M(p2p[i], gt[i]) / √area(M)`` (a float, or ``(B,)``), and the per-vertex errors
     when ``per_vertex``.
     """
+    source_mesh = as_mesh(source_mesh, "source_mesh")  # trimesh, pyFM, open3d, (V, F)
     _check_mesh(source_mesh)
     _check_method(method)
     chunk = _check_chunk(chunk_size)

@@ -16,6 +16,7 @@ import scipy.sparse as sp
 
 from .._util import BSFError, MeshError
 from .._mesh import Mesh
+from .._mesh import as_mesh
 
 __all__ = ["laplacian", "cotangent_stiffness", "mass_matrix", "POINT_CLOUD_NEIGHBORS"]
 
@@ -146,6 +147,7 @@ def laplacian(mesh: Mesh, mass: str = "mixed", robust: bool = False) -> tuple[sp
 
     ``(W, A)``: ``W`` symmetric PSD with ``W·1 = 0``; ``A`` diagonal with positive entries.
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     if not isinstance(mesh, Mesh):
         raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
     if mesh.is_point_cloud:

@@ -32,6 +32,7 @@ from ._laplacian import MASS_TYPES, laplacian
 from .._mesh import Mesh, n_components
 from ._spectrum_type import Spectrum
 from .._util import eigensolve_on_one_thread, one_blas_thread
+from .._mesh import as_mesh
 
 __all__ = ["spectrum", "spectrum_from_operators", "interval_operators", "interval_spectrum"]
 
@@ -278,6 +279,7 @@ def spectrum(mesh: Mesh, k: int, *, mass: str = "mixed", robust: bool = False,
 
     A mesh with ``c`` connected components has ``c`` zero eigenvalues; a warning says so.
     """
+    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
     if not isinstance(mesh, Mesh):
         raise MeshError(f"mesh must be a bsfjax.Mesh, got {type(mesh).__name__}")
     n = mesh.n_vertices
