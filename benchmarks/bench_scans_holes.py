@@ -101,15 +101,16 @@ def make_target(data, folder, tgt: int, kind: str, k: int = 0, seed: int = 0,
     out = bsfjax.Mesh(v, f)
     path = str(h.Path(folder) / f"{kind}_{tgt:03d}_{k}_{seed}.off")
     bsfjax.save_mesh(path, out)
+    body = bsfjax.split_main_body(out).vertices  # (a landmark must lie on the main body)
     return {"path": path, "kept": kept, "truth": labels[kept], "mass": vertex_areas(out),
-            "name": name, "mesh": out}
+            "name": name, "mesh": out, "body": body}
 
 
-def kept_landmarks(kept):
-    """The docs' 5 landmark pairs that a cut kept: (source rows, target rows)."""
-    import numpy as np
-
-    new = {int(o): i for i, o in enumerate(kept)}
+def kept_landmarks(kept, body=None):
+    """The docs' 5 landmark pairs that a cut kept (on the target's main body, the vertices
+    ``body``, when given: a hole may cut a finger off): (source rows, target rows)."""
+    on_body = set(range(len(kept))) if body is None else {int(i) for i in body}
+    new = {int(o): i for i, o in enumerate(kept) if i in on_body}
     src = [lm for lm in bs.LANDMARKS if lm in new]
     return src, [new[lm] for lm in src]
 
@@ -144,7 +145,7 @@ def run(data, folder, pairs=PAIRS, ks=(2, 5, 8), seeds=(0, 1), partial: bool = T
         for spec, t in targets:
             row = {"pair": f"{src:03d}→{tgt:03d}", "target": t["name"] if spec != "clean"
                    else "clean", "vertices": int(t["kept"].size)}
-            lm = kept_landmarks(t["kept"])
+            lm = kept_landmarks(t["kept"], t["body"])
             row["landmarks"] = len(lm[0])
             for mode in (["lm", "free"] if landmark_free else ["lm"]):
                 s0 = h.time.perf_counter()
