@@ -17,6 +17,7 @@ from ._mesh import (
     ExamplePair, FileRows, LabelFile, MainBody, Mesh, MeshReport, PointCloud, denoise,
     denoise_iterations, example_mesh, example_pair, load_labels, load_mesh, mesh_report,
     noise_level, save_labels, save_mesh, split_main_body, PreparedScan, prepare_scan,
+    Decimated, decimate,
 )
 
 # operators and spectrum
@@ -67,6 +68,7 @@ __all__ = [
     "Mesh", "FileRows", "MeshReport", "PointCloud", "load_mesh", "mesh_report", "save_mesh",
     "MainBody", "split_main_body",
     "denoise", "denoise_iterations", "noise_level", "PreparedScan", "prepare_scan",
+    "Decimated", "decimate",
     "ExamplePair",
     "example_mesh", "example_pair",
     # operators and spectrum

@@ -4,7 +4,8 @@
 edges, components), reading and writing mesh files (OFF, PLY, OBJ, STL, ... through meshio,
 with fast paths for plain OFF/PLY), segmentation files (`.txt` / `.npy`, SMPL's `.json`,
 per-triangle `.seg`), loop subdivision, denoising (Taubin smoothing with a strength from a noise estimate), a scan's preparation
-for its spectrum (`prepare_scan`: main body, then denoised), and the built-in example pair.
+for its spectrum (`prepare_scan`: main body, then denoised), quadric decimation (`decimate`:
+a large mesh's proxy), and the built-in example pair.
 """
 
 from ._example import ExamplePair, JOINTS, LABEL_NAMES, POSES, example_mesh, example_pair
@@ -19,11 +20,12 @@ from ._mesh_write import save_mesh
 from ._subdivision import subdivide
 from ._denoise import as_strength, auto_iterations, denoise, denoise_iterations, noise_level
 from ._scan import PreparedScan, prepare_scan
+from ._decimate import Decimated, decimate
 
 __all__ = [
-    "ExamplePair", "FileRows", "JOINTS", "LABEL_NAMES", "LabelFile", "MainBody", "Mesh",
+    "Decimated", "ExamplePair", "FileRows", "JOINTS", "LABEL_NAMES", "LabelFile", "MainBody", "Mesh",
     "MeshReport", "POSES", "PointCloud", "PreparedScan", "as_strength", "auto_iterations", "clean_mesh",
-    "denoise", "denoise_iterations", "edge_graph", "example_mesh", "example_pair",
+    "decimate", "denoise", "denoise_iterations", "edge_graph", "example_mesh", "example_pair",
     "graph_from_edges", "is_face_file", "knn_edges", "load_labels", "load_mesh", "mesh_edges",
     "mesh_report", "n_components", "noise_level", "prepare_scan", "read_label_file", "sample_surface",
     "save_labels", "save_mesh", "split_main_body", "subdivide", "vertex_areas",
