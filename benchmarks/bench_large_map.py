@@ -20,10 +20,10 @@ size is its own):
 * ``every vertex`` (the peer): ``proxy_above=None`` and ``selection_vertices`` raised above
   the target's size, so every candidate is searched over every vertex.
 
-Per way: seconds of the call (one call: it takes tens of seconds to minutes; JAX's compile
-time included, as a user's first call), peak RSS of the process, the kept start, and the
-kept map's mean geodesic error against the identity on 500 farthest-point samples of the
-target (``bsfjax.geodesic_error``, units of √area).
+Per way: seconds of the call (one call: it takes tens of seconds to minutes; JAX's compile time
+included, as a user's first call) and its CPU seconds (user and system), peak RSS of the
+process, the kept start, and the kept map's mean geodesic error against the identity on 500
+farthest-point samples of the target (``bsfjax.geodesic_error``, units of √area).
 
     python benchmarks/bench_large_map.py --out R --levels 0 1
     python benchmarks/bench_large_map.py --out R --levels 2 --ways proxy
@@ -41,6 +41,13 @@ import _harness as h
 WAYS = ("proxy", "selection", "every vertex")
 
 
+def _cpu() -> float:
+    """User and system CPU seconds of this process (on a loaded machine the wall time is not
+    the call's own)."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
 def one(data: str, levels: int, way: str, cache: str, queue) -> None:
     """One timed ``estimate_map`` in this (child) process; puts its row on ``queue``."""
     import numpy as np
@@ -54,13 +61,13 @@ def one(data: str, levels: int, way: str, cache: str, queue) -> None:
     every = {"proxy": {}, "selection": dict(proxy_above=None),
              "every vertex": dict(proxy_above=None, selection_vertices=target.n_vertices + 1)}
     estimator = bsfjax.MapEstimator(k=30, refine_to=60, **every[way])
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _cpu()
     est = estimator(sm, sn, source_mesh=source, target_mesh=target)
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, _cpu() - c0
     samples = np.asarray(bsfjax.farthest_point_sampling(target, 500))
     error = bsfjax.geodesic_error(source, est.p2p[samples], samples)
     queue.put({"levels": levels, "vertices": target.n_vertices, "way": way,
-               "seconds": round(seconds, 1),
+               "seconds": round(seconds, 1), "cpu_seconds": round(cpu, 1),
                "peak_rss_gb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6, 2),
                "start": list(est.start), "derived_landmarks_kept": est.landmarks is not None,
                "swapped": bool(est.swapped), "geodesic_error": round(float(error), 4)})
@@ -82,10 +89,11 @@ def run(data: Path, levels, cache: Path, ways=WAYS) -> list[dict]:
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = ["| vertices | way | seconds | peak RSS GB | kept start | geodesic error |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| vertices | way | seconds | CPU seconds | peak RSS GB | kept start | geodesic error |",
+             "|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['vertices']} | {r['way']} | {r['seconds']} | {r['peak_rss_gb']} | "
+        lines.append(f"| {r['vertices']} | {r['way']} | {r['seconds']} | "
+                     f"{r.get('cpu_seconds', '')} | {r['peak_rss_gb']} | "
                      f"{tuple(r['start'])} | {r['geodesic_error']} |")
     by = {(r["levels"], r["way"]): r for r in rows}
     for lv in sorted({r["levels"] for r in rows}):

@@ -131,7 +131,10 @@ class MapEstimator(eqx.Module):
       with the nearest proxy vertex, its ``k × k`` functional map on the given spectra, ZoomOut
       to ``refine_to`` and the point map over every vertex (`bsfjax._maps._proxy`).
       ``MapEstimate.proxy`` gives the proxies' sizes.  Clean FAUST meshes (6890 vertices) are
-      below it.
+      below it.  TOSCA cat subdivided once (111.5K vertices): 1.58 GB peak instead of 5.30,
+      geodesic error 0.0340 (0.0339 on the whole meshes); a ~105K-vertex raw-scan-like FAUST
+      target, the whole ``bsfjax transfer``: 94.8 % right (clean pair 97.0 %), 1.4 GB, 70 CPU
+      seconds (docs/benchmarks.md).
     """
 
     k: int = eqx.field(static=True, default=30)
