@@ -19,6 +19,7 @@ from ._mesh import (
     denoise_iterations, example_mesh, example_pair, load_labels, load_mesh, mesh_report,
     noise_level, save_labels, save_mesh, split_main_body, PreparedScan, prepare_scan,
     HoleFill, boundary_loops, fill_holes,
+    Decimated, decimate,
 )
 from ._mesh import as_mesh
 
@@ -88,6 +89,7 @@ __all__ = [
     "MainBody", "split_main_body",
     "denoise", "denoise_iterations", "noise_level", "PreparedScan", "prepare_scan",
     "HoleFill", "boundary_loops", "fill_holes",
+    "Decimated", "decimate",
     "ExamplePair",
     "example_mesh", "example_pair",
     # operators and spectrum

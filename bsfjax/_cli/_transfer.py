@@ -192,6 +192,9 @@ def _transfer_one(args) -> int:
             print(f"no landmarks: kept start k0 = {est.start[0]}, WKS variance "
                   f"{est.start[1]:g}{second}{turn}; geodesic distortion {est.distortion:.4f}, "
                   f"orientation agreement {est.orientation:.1%}", file=sys.stderr)
+            if est.proxy is not None:  # a large mesh: the start was chosen on proxies
+                print(f"large mesh: chosen on proxies of {est.proxy[0]} and {est.proxy[1]} "
+                      "vertices, then carried to the meshes", file=sys.stderr)
             if est.turn_doubtful:
                 warnings.warn(TURN_DOUBT, stacklevel=1)
     from .._transfer import method_for_shapes

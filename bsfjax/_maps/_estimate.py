@@ -49,6 +49,10 @@ class MapEstimate(NamedTuple):
     #: the 5 turned maps kept in all) and partly wrong on 2 (docs/results/segmentation.md,
     #: "Without landmarks").  ``None`` without the check, or on a target too coarse for it
     turn_doubtful: bool | None = None
+    #: without landmarks on a mesh above the estimator's ``proxy_above`` vertices: the vertex
+    #: counts ``(source, target)`` of the proxies the choice among starts ran on (a mesh
+    #: below the threshold is its own proxy); ``None`` otherwise
+    proxy: tuple | None = None
 
 
 class Run(NamedTuple):

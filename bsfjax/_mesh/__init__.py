@@ -4,8 +4,8 @@
 edges, components), reading and writing mesh files (OFF, PLY, OBJ, STL, ... through meshio,
 with fast paths for plain OFF/PLY), segmentation files (`.txt` / `.npy`, SMPL's `.json`,
 per-triangle `.seg`), loop subdivision, denoising (Taubin smoothing with a strength from a noise estimate; of point clouds too), a scan's preparation
-for its spectrum (`prepare_scan`: main body, then denoised, then its holes closed), the built-in
-example pair, a point cloud's oriented stand-in surface (`cloud_surface`), and meshes from trimesh, pyFM, open3d or ``(V, F)`` arrays (`as_mesh`).
+for its spectrum (`prepare_scan`: main body, then denoised, then its holes closed), quadric decimation (`decimate`: a large
+mesh's proxy), the built-in example pair, a point cloud's oriented stand-in surface (`cloud_surface`), and meshes from trimesh, pyFM, open3d or ``(V, F)`` arrays (`as_mesh`).
 """
 
 from ._example import ExamplePair, JOINTS, LABEL_NAMES, POSES, example_mesh, example_pair
@@ -24,9 +24,10 @@ from ._denoise import (as_strength, auto_iterations, denoise, denoise_iterations
 from ._cloud_surface import CloudSurface, cloud_normals, cloud_surface
 from ._holes import HoleFill, boundary_loops, fill_holes
 from ._scan import PreparedScan, prepare_scan
+from ._decimate import Decimated, decimate
 
 __all__ = [
-    "CloudSurface", "ExamplePair", "FileRows", "HoleFill", "JOINTS", "LABEL_NAMES", "LabelFile",
+    "CloudSurface", "Decimated", "decimate", "ExamplePair", "FileRows", "HoleFill", "JOINTS", "LABEL_NAMES", "LabelFile",
     "MainBody", "Mesh", "MeshReport", "POSES", "PointCloud", "PreparedScan", "as_mesh",
     "as_strength", "auto_iterations", "boundary_loops", "clean_mesh", "cloud_normals",
     "cloud_surface", "fill_holes", "is_mesh_like", "mesh_threshold", "surface_for_map",
