@@ -284,6 +284,11 @@ def int_list(text: str) -> tuple[int, ...]:
     return tuple(int(x) for x in text.split(",") if x)
 
 
+def pair_list(text: str) -> list[tuple[int, int]]:
+    """``"0-10,1-11"`` → ``[(0, 10), (1, 11)]``: FAUST source-target registration numbers."""
+    return [tuple(int(x) for x in p.split("-")) for p in text.split(",") if p]
+
+
 def name_list(text: str) -> list[str]:
     """``"lstsq,omp"`` → ``["lstsq", "omp"]`` (empty items dropped)."""
     return [x for x in text.split(",") if x]

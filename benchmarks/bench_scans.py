@@ -169,7 +169,7 @@ def main():
                          "meshes and on bsfjax.denoise's")
     args = ap.parse_args()
     h.require_data(h.Path(args.data) / "faust", h.Path(args.data) / h.SMPL_SEGMENTATION)
-    pairs = [tuple(int(x) for x in p.split("-")) for p in args.pairs.split(",")]
+    pairs = h.pair_list(args.pairs)
     sigmas = [float(s) for s in args.sigmas.split(",")]
     with tempfile.TemporaryDirectory() as tmp:
         rows = run(h.Path(args.data), h.Path(tmp), pairs, sigmas, not args.landmarks_only,

@@ -211,7 +211,7 @@ def main():
     ap.add_argument("--pyfm", action="store_true", help="also pyFM's pipeline (pyfmaps)")
     args = ap.parse_args()
     h.require_data(h.Path(args.data) / "faust", h.Path(args.data) / h.SMPL_SEGMENTATION)
-    pairs = [tuple(int(x) for x in p.split("-")) for p in args.pairs.split(",")]
+    pairs = h.pair_list(args.pairs)
     with tempfile.TemporaryDirectory() as tmp:
         rows = run(h.Path(args.data), h.Path(tmp), pairs, h.int_list(args.holes),
                    h.int_list(args.seeds), not args.no_partial, not args.landmarks_only,

@@ -201,7 +201,7 @@ def main():
     ap.add_argument("--keep", type=Path, help="write the scan-like targets to this folder")
     args, extra = ap.parse_known_args()
     h.require_data(h.Path(args.data) / "faust", h.Path(args.data) / h.SMPL_SEGMENTATION)
-    pairs = [tuple(int(x) for x in p.split("-")) for p in args.pairs.split(",")]
+    pairs = h.pair_list(args.pairs)
     with tempfile.TemporaryDirectory() as tmp:
         folder = args.keep or Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)

@@ -274,8 +274,10 @@ def cmd_transfer_many(args, error) -> int:
     if not args.no_denoise:
         from .._mesh import prepare_scan
 
-        # (of its main body, as transfer_collection measures it: cheap beside the spectra)
-        print(f"denoise: {prepare_scan(source).summary('source')} (per target: summary.json)",
+        # (of its main body, as transfer_collection measures it; its holes need not be closed
+        # for the line: cheap beside the spectra)
+        print(f"denoise: {prepare_scan(source, fill_holes=False).summary('source')} "
+              "(per target: summary.json)",
               file=sys.stderr)
     mine = len(process_share(range(len(todo))))
     bar = tqdm(total=mine, desc="targets", unit="target", disable=args.no_progress,
