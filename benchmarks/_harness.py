@@ -28,6 +28,7 @@ command in child processes stay light.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import io
 import json
@@ -478,3 +479,61 @@ def pyfm_mesh(mesh, spec, W):
     tm.eigenvalues = spec.evals.copy()
     tm.eigenvectors = spec.evecs.copy()
     return tm
+
+
+# --- scan-like targets (the scan benchmarks: bench_scans*.py, bench_point_clouds.py) ---------
+
+
+#: The landmark vertices of the tests and docs (the same on every registration).
+LANDMARKS = (412, 3216, 5907, 6296, 2445)
+
+
+def accuracy(labels, truth, mass) -> float:
+    import numpy as np
+
+    return float(np.sum(mass * (labels == truth)) / np.sum(mass))
+
+
+def run_cli(source: str, target: str, labels: str, out: str, landmarks: bool, denoise: bool):
+    """``bsfjax transfer`` in this process: the labels written, the stderr text.  ``landmarks``:
+    ``True`` (the 5 pairs ``LANDMARKS``), ``False`` (none) or ``(source rows, target rows)``."""
+    import numpy as np
+
+    from bsfjax.cli import main
+
+    argv = ["transfer", source, target, "--labels", labels, "--out", out]
+    if landmarks:
+        src, tgt = (LANDMARKS, LANDMARKS) if landmarks is True else landmarks
+        argv += ["--landmarks", f"{','.join(map(str, src))}:{','.join(map(str, tgt))}"]
+    if not denoise:
+        argv.append("--no-denoise")
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rc = main(argv)
+    if rc:
+        raise RuntimeError(f"bsfjax transfer failed ({rc}): {err.getvalue()}")
+    return np.loadtxt(out, dtype=np.int64), err.getvalue()
+
+
+def run_pyfm(source, target, truth, mass, landmarks=None, target_truth=None) -> float:
+    """pyFM's own pipeline (its README's: WKS with the 5 landmarks, a 35 × 35 map, ZoomOut
+    15 steps on 2000 samples) from ``source`` to ``target``: the accuracy of the pulled-back
+    labels.  ``landmarks``: ``(source rows, target rows)`` instead of ``LANDMARKS`` on both;
+    ``target_truth``: the target's labels when its vertices are not the source's (``truth``:
+    the source's)."""
+    import numpy as np
+    from pyFM.functional import FunctionalMapping
+    from pyFM.mesh import TriMesh
+
+    model = FunctionalMapping(*[TriMesh(np.array(m.vertices), np.array(m.faces))
+                                for m in (source, target)])
+    lm = np.stack(landmarks or [LANDMARKS, LANDMARKS], axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.preprocess(n_descr=100, descr_type="WKS", landmarks=lm, subsample_step=5,
+                         k_process=200, verbose=False)
+        model.fit(K=(35, 35), w_descr=1e0, w_lap=1e-2, w_dcomm=1e-1, w_orient=0)
+        model.zoomout_refine(nit=15, step=1, subsample=2000, verbose=False)
+    return accuracy(truth[model.get_p2p()], truth if target_truth is None else target_truth,
+                    mass)

@@ -38,7 +38,7 @@ import bsfjax
 from bsfjax.cli import main as bsfjax_command
 from bsfjax.internal import sample_surface
 
-LANDMARKS = [412, 3216, 5907, 6296, 2445]
+LANDMARKS = list(h.LANDMARKS)
 
 
 def _transfer(folder, source_path, target_path, landmarks, labels_path):

@@ -12,9 +12,9 @@ From FAUST registrations with the SMPL 24 parts to FAUST targets made scan-like,
 The target is a genuinely smaller mesh (its vertices in their original order, renumbered).
 Truth: the SMPL labels of the kept vertices; accuracy: the share of the holed / partial
 target's own area (barycentric vertex areas of the mesh as written) labelled right.  Each
-target runs through the default ``bsfjax transfer`` in this process (``bench_scans.run_cli``)
+target runs through the default ``bsfjax transfer`` in this process (``_harness.run_cli``)
 with the 5 landmark pairs of the docs (those a cut removed are dropped) and without landmarks,
-the clean pair with both, and with ``--pyfm`` pyFM's pipeline (``bench_scans.run_pyfm``) with
+the clean pair with both, and with ``--pyfm`` pyFM's pipeline (``_harness.run_pyfm``) with
 the same landmarks.  The partial rows list the source parts the command reported without a
 counterpart.  Prints a Markdown table and writes it (``--out``) with a JSON of the rows.
 
@@ -27,7 +27,6 @@ import re
 import tempfile
 
 import _harness as h
-import bench_scans as bs
 
 #: SMPL parts removed from the partial targets: the left arm from the elbow down, the right foot.
 PARTIAL_PARTS = ("leftForeArm", "leftHand", "leftHandIndex1", "rightFoot", "rightToeBase")
@@ -111,7 +110,7 @@ def kept_landmarks(kept, body=None):
     ``body``, when given: a hole may cut a finger off): (source rows, target rows)."""
     on_body = set(range(len(kept))) if body is None else {int(i) for i in body}
     new = {int(o): i for i, o in enumerate(kept) if i in on_body}
-    src = [lm for lm in bs.LANDMARKS if lm in new]
+    src = [lm for lm in h.LANDMARKS if lm in new]
     return src, [new[lm] for lm in src]
 
 
@@ -149,9 +148,9 @@ def run(data, folder, pairs=PAIRS, ks=(2, 5, 8), seeds=(0, 1), partial: bool = T
             row["landmarks"] = len(lm[0])
             for mode in (["lm", "free"] if landmark_free else ["lm"]):
                 s0 = h.time.perf_counter()
-                labels, err = bs.run_cli(source, t["path"], lab_file, out,
+                labels, err = h.run_cli(source, t["path"], lab_file, out,
                                          lm if mode == "lm" else False, True)
-                row[mode] = bs.accuracy(labels, t["truth"], t["mass"])
+                row[mode] = h.accuracy(labels, t["truth"], t["mass"])
                 row[mode + "_s"] = round(h.time.perf_counter() - s0, 1)
                 if mode == "lm":
                     gone = missing_report(err)
@@ -165,7 +164,7 @@ def run(data, folder, pairs=PAIRS, ks=(2, 5, 8), seeds=(0, 1), partial: bool = T
             if pyfm:
                 import bsfjax
 
-                row["pyfm"] = bs.run_pyfm(bsfjax.load_mesh(source), t["mesh"], truth, t["mass"],
+                row["pyfm"] = h.run_pyfm(bsfjax.load_mesh(source), t["mesh"], truth, t["mass"],
                                           landmarks=lm, target_truth=t["truth"])
                 print(f"  {row['pair']} {row['target']} pyFM: {row['pyfm']:.1%}",
                       file=h.sys.stderr, flush=True)

@@ -19,8 +19,8 @@ from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pa
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._proxy import needs_proxy, proxy_estimate
-from ._turn import check_sizes, descriptors, landmarks_from_map, measures_disagree, \
-    selection_rows, self_map
+from ._turn import check_sizes, descriptors, landmarks_from_map, selection_rows, self_map, \
+    turn_choice, turn_landmark_sets
 from .._sampling import Subsample, subsample
 from .._spectral import Spectrum, unit_area_pair
 from .._util import (BSFError, check_int, check_real, check_source_mesh, on_one_blas_thread,
@@ -69,11 +69,15 @@ class MapEstimator(eqx.Module):
        mirror symmetry ``S`` ([`mirror_symmetry`][bsfjax.MapEstimator.mirror_symmetry], a
        self-map that reverses orientation), reads ``turn_landmarks`` pairs ``(x, y)`` off the
        kept map, estimates with ``(S x, y)`` and the orientation term, then once more with
-       ``derived_landmarks`` pairs read off that map, and keeps whichever of the two maps
-       [`bsfjax.choose_map`][bsfjax.choose_map] prefers by the local distortion (pairs of
-       ``turn_samples`` target samples closer than ``turn_radius``), which a twisted limb
-       raises.  Where the orientation agreement prefers the other map the choice is a guess,
-       and ``MapEstimate.turn_doubtful`` says so.
+       ``derived_landmarks`` pairs read off that map (the whole turn).  With
+       ``turn_candidates="limbs"`` a single swapped pair of limbs (noisy shins) is checked
+       too: each landmark farther than ``turn_radius`` from its mirror image gives the
+       alternative ``(x, y)`` with that ``xᵢ`` alone replaced by ``S xᵢ``.  Among the maps
+       within ``orientation_slack`` of the best orientation agreement, the one of least local
+       distortion (pairs of ``turn_samples`` target samples closer than ``turn_radius``: a
+       twisted limb raises it) times global distortion (a limb torn off its side) is kept
+       (``"mirror"``: the whole turn alone, by local distortion).  Where the orientation
+       agreement prefers the other side the choice is a guess: ``MapEstimate.turn_doubtful``.
 
     On a target of more than ``selection_vertices`` vertices, phases 2–4 search each
     candidate's point map only where it is compared: the corners of ``selection_faces``
@@ -116,8 +120,11 @@ class MapEstimator(eqx.Module):
       of the pull-back on the 9 pairs: 92.57 % with none, 94.40 % with 10, 94.47 % with 20
       (94.46 % with 5 true landmarks).
     - `turn_check`: run phase 4 (``True``).
-    - `turn_landmarks`: landmark pairs moved by the mirror symmetry in phase 4 (5: the tips
-      of the limbs, where a turn swaps left and right).
+    - `turn_landmarks`: landmark pairs moved by the mirror symmetry in phase 4 (5: the
+      source's farthest points, the tips of the limbs, where a turn swaps left and right).
+    - `turn_candidates`: the alternatives of phase 4 and how they are compared, ``"limbs"``
+      (the whole turn and one limb at a time, by local times global distortion) or
+      ``"mirror"`` (the whole turn, by local distortion: the earlier check) (``"limbs"``).
     - `turn_samples`, `turn_radius`: the local distortion of phase 4, on this many target
       samples (200), over their pairs closer than this (0.15, at unit area).
     - `selection_vertices`, `selection_faces`: above this many target vertices (20000) the
@@ -153,6 +160,7 @@ class MapEstimator(eqx.Module):
     derived_landmarks: int = eqx.field(static=True, default=20)
     turn_check: bool = eqx.field(static=True, default=True)
     turn_landmarks: int = eqx.field(static=True, default=5)
+    turn_candidates: str = eqx.field(static=True, default="limbs")
     turn_samples: int = eqx.field(static=True, default=200)
     turn_radius: float = eqx.field(static=True, default=0.15)
     selection_vertices: int = eqx.field(static=True, default=20000)
@@ -173,6 +181,9 @@ class MapEstimator(eqx.Module):
             raise BSFError(f"orientation_slack must be in [0, 1], got {self.orientation_slack}")
         check_int(self.distortion_samples, "distortion_samples", 2)
         check_int(self.turn_landmarks, "turn_landmarks", 1)
+        if self.turn_candidates not in ("limbs", "mirror"):
+            raise BSFError(f"turn_candidates must be 'limbs' or 'mirror', got "
+                           f"{self.turn_candidates!r}")
         check_int(self.turn_samples, "turn_samples", 2)
         check_real(self.turn_radius, "turn_radius", positive=True)
         check_int(self.selection_vertices, "selection_vertices", 0)
@@ -366,7 +377,7 @@ class MapEstimator(eqx.Module):
 
     def _check_turn(self, pb: Problem, run: Run, quality: dict, source_given: Spectrum,
                     source_symmetry) -> tuple:
-        """Phase 4: the alternative with left and right swapped, kept if preferred."""
+        """Phase 4: the alternatives with left and right swapped, one kept if preferred."""
         x, y = landmarks_from_map(pb.source_mesh, run.p2p, self.turn_landmarks)
         if source_symmetry is not None:
             sx = source_symmetry[x]
@@ -375,24 +386,31 @@ class MapEstimator(eqx.Module):
             sx = at_size.mirror_symmetry(
                 source_given, pb.source_mesh,
                 samples=None if pb.samples is None else pb.samples[0], rows=x)
-        alt = self._estimate(pb, self._single_start(), (sx, y), orient=True)
-        alt_landmarks = (sx, y)
-        if self.derived_landmarks:
-            alt_landmarks, alt = self._derived(pb, alt.p2p)
-        both = np.stack([run.p2p, alt.p2p]).astype(np.int64)
-        local = self._distortion(pb, both, self.turn_samples, self.turn_radius)
-        orient = _agreements(pb.source_mesh, pb.target_mesh, both, pb.faces)
-        quality = dict(quality)
-        # (a target too coarse for the local distortion keeps the map)
-        quality["swapped"] = local is not None and choose_map(
-            local, orient, slack=self.orientation_slack) == 1
-        if local is not None:
-            quality["turn_doubtful"] = measures_disagree(self, local, orient)
-        if quality["swapped"]:
-            run = alt
-            quality.update(landmarks=alt_landmarks, orientation=float(orient[1]),
-                           distortion=float(self._distortion(pb, alt.p2p)[0]))
-        return run, quality
+        joint = self.turn_candidates == "limbs"
+        sets = (turn_landmark_sets(pb.source_mesh, x, sx, y, self.turn_radius) if joint
+                else [(sx, y)])
+        runs, kept_sets, turn = [run], [quality.get("landmarks")], []
+        for n, lms in enumerate(sets):
+            alt = self._estimate(pb, self._single_start(), lms, orient=True)
+            if joint or not self.derived_landmarks:  # ("limbs": both estimates compete)
+                runs.append(alt)
+                kept_sets.append(lms)
+                turn += [len(runs) - 1] if n == 0 else []
+            if self.derived_landmarks:
+                derived, alt = self._derived(pb, alt.p2p)
+                runs.append(alt)
+                kept_sets.append(derived)
+                turn += [len(runs) - 1] if n == 0 else []
+        quality = dict(quality, swapped=False)
+        choice = turn_choice(self, pb, runs, joint, turn)
+        if choice is None:  # (a target too coarse for the local distortion keeps the map)
+            return run, quality
+        pick, doubtful, orient = choice
+        quality.update(swapped=pick != 0, turn_doubtful=doubtful)
+        if pick:
+            quality.update(landmarks=kept_sets[pick], orientation=float(orient[pick]),
+                           distortion=float(self._distortion(pb, runs[pick].p2p)[0]))
+        return runs[pick], quality
 
     def _result(self, pb: Problem, run: Run, am, an, quality: dict) -> MapEstimate:
         """The kept run as a [`MapEstimate`][bsfjax.MapEstimate] in the given bases (its point

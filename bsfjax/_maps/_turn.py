@@ -89,13 +89,45 @@ def selection_rows(est, target_mesh) -> tuple:
     return rows.astype(np.int64), faces
 
 
-def measures_disagree(est, local, orient) -> bool:
-    """Whether the local distortion and the orientation agreement of the turn check's two maps
-    prefer different maps, both maps within the orientation slack (where
-    [`choose_map`][bsfjax.choose_map] goes by the local distortion alone)."""
-    if abs(orient[0] - orient[1]) > est.orientation_slack:
+def measures_disagree(est, score, orient, pick: int | None = None, turn=(1,)) -> bool:
+    """Whether the turn check's score and the orientation agreement prefer different maps of
+    two, both within the orientation slack (where [`choose_map`][bsfjax.choose_map] goes by
+    the score alone): the kept map ``pick`` (default: the one ``choose_map`` keeps) and its
+    other side, the map checked (``0``) for a map of the whole turn (indices ``turn``), else
+    the whole turn's map of least score."""
+    if pick is None:
+        pick = choose_map(score, orient, slack=est.orientation_slack)
+    turn = [int(t) for t in turn]
+    other = 0 if pick in turn else min(turn, key=lambda t: score[t])
+    if abs(orient[pick] - orient[other]) > est.orientation_slack:
         return False
-    return bool((local[0] <= local[1]) != (orient[0] >= orient[1]))
+    return bool((score[pick] <= score[other]) != (orient[pick] >= orient[other]))
+
+
+def turn_landmark_sets(source_mesh, x, sx, y, radius: float):
+    """The landmark pairs of the turn check's alternatives to a map that gave the pairs
+    ``(x, y)`` (``S x``: their mirror images): the whole turn ``(S x, y)``, then one set per
+    limb: each landmark ``xᵢ`` farther than ``radius`` (Euclidean, at unit area) from its
+    mirror image (a limb, not the head) is mirrored, ``xᵢ → S xᵢ``, together with the
+    landmarks within ``radius`` of ``S xᵢ`` (the other hand's, when both are landmarks:
+    the two swap sides), the others kept: the map with one pair of limbs on the other side.
+    Sets equal to the whole turn's are left out."""
+    v = np.asarray(source_mesh.vertices, np.float64)
+    x, sx, y = (np.asarray(a, np.int64) for a in (x, sx, y))
+    r = radius * np.sqrt(source_mesh.area)
+    off = np.linalg.norm(v[sx] - v[x], axis=1) > r
+    groups = []
+    for i in np.flatnonzero(off):
+        g = frozenset([int(i)]) | frozenset(
+            np.flatnonzero(np.linalg.norm(v[x] - v[sx[i]], axis=1) < r).tolist())
+        if g not in groups and g != frozenset(np.flatnonzero(off).tolist()):
+            groups.append(g)
+    sets = [(sx, y)]
+    for g in groups:
+        xi = x.copy()
+        xi[list(g)] = sx[list(g)]
+        sets.append((xi, y))
+    return sets
 
 
 def landmarks_from_map(source_mesh, p2p, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -131,3 +163,25 @@ def check_sizes(k, refine_to, km: int) -> int:
     if not isinstance(refine_to, (int, np.integer)) or not k <= refine_to <= km:
         raise BSFError(f"refine_to must be an integer in [{k}, {km}], got {refine_to!r}")
     return refine_to
+
+
+def turn_choice(est, pb, runs: list, joint: bool, turn: list):
+    """Which of the turn check's ``runs`` to keep, whether that is doubtful, and their
+    orientation agreements; ``None`` on a target too coarse for the local distortion.
+
+    **Arguments:**
+
+    - `pb`: the estimator's problem (meshes, selection of faces).
+    - `runs`: the kept run first, then the alternatives.
+    - `joint`: score by local times global distortion (``turn_candidates="limbs"``), else by
+      the local distortion alone.
+    - `turn`: the indices of the whole turn's maps in ``runs``.
+    """
+    maps = np.stack([r.p2p for r in runs]).astype(np.int64)
+    local = est._distortion(pb, maps, est.turn_samples, est.turn_radius)
+    if local is None:
+        return None
+    orient = _agreements(pb.source_mesh, pb.target_mesh, maps, pb.faces)
+    score = local * est._distortion(pb, maps) if joint else local
+    pick = choose_map(score, orient, slack=est.orientation_slack)
+    return pick, measures_disagree(est, score, orient, pick, turn), orient
