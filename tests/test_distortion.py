@@ -23,7 +23,7 @@ def sphere():
     return mesh, mirror
 
 
-def reference_distortion(src, tgt, p2p, samples, radius=None):
+def reference_distortion(src, tgt, p2p, samples, radius=None, fit_scale=False):
     """float64 reference: scipy's Dijkstra on edge graphs built here, unit areas; with a
     ``radius``, the relative error over the pairs closer than it on the target."""
     def dist(mesh, idx):
@@ -40,7 +40,9 @@ def reference_distortion(src, tgt, p2p, samples, radius=None):
     if radius is not None:
         near = (dn > 0) & (dn < radius)
         return (np.abs(dm - dn)[near] / dn[near]).mean()
-    return np.abs(dm - dn)[~np.eye(s, dtype=bool)].mean()
+    a, b = dm[~np.eye(s, dtype=bool)], dn[~np.eye(s, dtype=bool)]
+    scale = np.clip(a @ b / (b @ b), 1 / 1.2, 1.2) if fit_scale else 1.0
+    return np.abs(a - scale * b).mean()
 
 
 def test_local_distortion_against_a_reference(sphere):
@@ -84,6 +86,29 @@ def test_distortion_of_isometries_and_against_a_reference(sphere):
     assert map_distortion(mesh, mesh, noisy, n_samples=40) == pytest.approx(ref, rel=1e-12)
     both = map_distortion(mesh, mesh, np.stack([ident, noisy]), n_samples=40)
     np.testing.assert_allclose(both, [0, ref], rtol=1e-12, atol=1e-15)
+
+
+def test_distortion_up_to_a_scale(sphere):
+    """``fit_scale``: the float64 reference with its least-squares scale on a sphere stretched
+    along one axis (other proportions), another value than without; a map onto one vertex is
+    bounded by the clipped scale, not 0."""
+    mesh, _ = sphere
+    n = mesh.n_vertices
+    ident = np.arange(n)
+    tall = bsfjax.Mesh(np.asarray(mesh.vertices) * [1, 1.6, 1], mesh.faces)
+    samples = np.asarray(bsfjax.farthest_point_sampling(tall, 50))
+    plain = reference_distortion(mesh, tall, ident, samples)
+    fitted = reference_distortion(mesh, tall, ident, samples, fit_scale=True)
+    assert fitted != pytest.approx(plain, rel=1e-3)
+    assert map_distortion(mesh, tall, ident, n_samples=50, fit_scale=True) == \
+        pytest.approx(fitted, rel=1e-12)
+    assert map_distortion(mesh, tall, ident, n_samples=50) == pytest.approx(plain, rel=1e-12)
+    point = np.zeros(n, np.int64)  # every target vertex onto vertex 0: d_M = 0
+    dn = reference_distortion(tall, tall, ident, samples)  # (0: the identity)
+    assert dn == 0
+    d0 = map_distortion(mesh, tall, point, n_samples=50, fit_scale=True)
+    assert d0 == pytest.approx(reference_distortion(mesh, tall, point, samples) / 1.2,
+                               rel=1e-12)
 
 
 def test_distortion_of_a_mesh_in_two_pieces(sphere):

@@ -57,16 +57,22 @@ def test_estimate_map_without_landmarks_uses_the_orientation_term(small_pair):
 
 def test_estimate_map_without_landmarks_keeps_the_best_start(small_pair):
     """Several starts: the result is the start that :func:`bsfjax.choose_map` picks from the
-    single-start maps' distortion and orientation (an independent route), with those values;
+    single-start maps' distortion (up to a scale: ``fit_scale``) and orientation (an
+    independent route), with those values; ``fit_scale=False`` picks by the plain distortion;
     the default starts are ``landmark_free_starts`` up to ``refine_to``; bad starts are named."""
     pair, sm, sn = small_pair
     meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
     starts = ((10, 3.5), (20, 7.0), (30, 14.0), (12, 7.0))
     single = [estimate_map(sm, sn, k=20, refine_to=40, starts=(s,), **meshes) for s in starts]
     maps = np.stack([e.p2p for e in single])
-    dist = bsfjax.map_distortion(pair.source, pair.target, maps)
+    dist = bsfjax.map_distortion(pair.source, pair.target, maps, fit_scale=True)
     orient = bsfjax.orientation_agreement(pair.source, pair.target, maps)
     best = bsfjax.choose_map(dist, orient)
+    plain = bsfjax.map_distortion(pair.source, pair.target, maps)
+    est0 = bsfjax.MapEstimator(k=20, refine_to=40, starts=starts, derived_landmarks=0,
+                               turn_check=False, fit_scale=False)(sm, sn, **meshes)
+    assert est0.start == starts[bsfjax.choose_map(plain, orient)]
+    assert est0.distortion == pytest.approx(plain[bsfjax.choose_map(plain, orient)])
     est = estimate_map(sm, sn, k=20, refine_to=40, starts=starts, derived_landmarks=0,
                        turn_check=False, **meshes)
     np.testing.assert_array_equal(est.p2p, single[best].p2p)
@@ -83,7 +89,7 @@ def test_estimate_map_without_landmarks_keeps_the_best_start(small_pair):
     maps = np.stack([estimate_map(sm, sn, k=20, refine_to=25, starts=(s,), **meshes).p2p
                      for s in kept])
     assert low.start == kept[bsfjax.choose_map(
-        bsfjax.map_distortion(pair.source, pair.target, maps),
+        bsfjax.map_distortion(pair.source, pair.target, maps, fit_scale=True),
         bsfjax.orientation_agreement(pair.source, pair.target, maps))]
     with pytest.raises(ValueError, match="several starts are told apart by the meshes"):
         estimate_map(sm, sn, k=20, refine_to=40, starts=starts)

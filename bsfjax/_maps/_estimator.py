@@ -116,6 +116,8 @@ class MapEstimator(eqx.Module):
       mirrored or slid ones down to 0.34).
     - `distortion_samples`: target samples of the geodesic distortion (that of
       [`bsfjax.map_distortion`][bsfjax.map_distortion], 100).
+    - `fit_scale`: phases 2–4 take the global distortion up to a bounded scale (``True``;
+      [`map_distortion`][bsfjax.map_distortion]'s ``fit_scale``: bodies of other builds).
     - `derived_landmarks`: landmark pairs of phase 3 (20; 0: no phase 3).  SMPL-part accuracy
       of the pull-back on the 9 pairs: 92.57 % with none, 94.40 % with 10, 94.47 % with 20
       (94.46 % with 5 true landmarks).
@@ -161,6 +163,7 @@ class MapEstimator(eqx.Module):
     turn_check: bool = eqx.field(static=True, default=True)
     turn_landmarks: int = eqx.field(static=True, default=5)
     turn_candidates: str = eqx.field(static=True, default="limbs")
+    fit_scale: bool = eqx.field(static=True, default=True)
     turn_samples: int = eqx.field(static=True, default=200)
     turn_radius: float = eqx.field(static=True, default=0.15)
     selection_vertices: int = eqx.field(static=True, default=20000)
@@ -182,8 +185,7 @@ class MapEstimator(eqx.Module):
         check_int(self.distortion_samples, "distortion_samples", 2)
         check_int(self.turn_landmarks, "turn_landmarks", 1)
         if self.turn_candidates not in ("limbs", "mirror"):
-            raise BSFError(f"turn_candidates must be 'limbs' or 'mirror', got "
-                           f"{self.turn_candidates!r}")
+            raise BSFError(f"turn_candidates must be 'limbs' or 'mirror', got {self.turn_candidates!r}")
         check_int(self.turn_samples, "turn_samples", 2)
         check_real(self.turn_radius, "turn_radius", positive=True)
         check_int(self.selection_vertices, "selection_vertices", 0)
@@ -344,7 +346,8 @@ class MapEstimator(eqx.Module):
         return _distortions(pb.source_mesh, pb.target_mesh,
                             np.atleast_2d(candidates).astype(np.int64),
                             self.distortion_samples if n_samples is None else n_samples,
-                            radius, pb.geodesics())
+                            radius, pb.geodesics(),
+                            fit_scale=self.fit_scale and radius is None)
 
     def _choose_start(self, pb: Problem, starts: tuple, runs: list) -> tuple:
         """Phase 2: the run [`choose_map`][bsfjax.choose_map] keeps, and its quality."""
