@@ -494,14 +494,16 @@ def accuracy(labels, truth, mass) -> float:
     return float(np.sum(mass * (labels == truth)) / np.sum(mass))
 
 
-def run_cli(source: str, target: str, labels: str, out: str, landmarks: bool, denoise: bool):
+def run_cli(source: str, target: str, labels: str, out: str, landmarks: bool, denoise: bool,
+            extra=()):
     """``bsfjax transfer`` in this process: the labels written, the stderr text.  ``landmarks``:
-    ``True`` (the 5 pairs ``LANDMARKS``), ``False`` (none) or ``(source rows, target rows)``."""
+    ``True`` (the 5 pairs ``LANDMARKS``), ``False`` (none) or ``(source rows, target rows)``;
+    ``extra``: more arguments (``--map p2p FILE``, ``--method ...``)."""
     import numpy as np
 
     from bsfjax.cli import main
 
-    argv = ["transfer", source, target, "--labels", labels, "--out", out]
+    argv = ["transfer", source, target, "--labels", labels, "--out", out, *extra]
     if landmarks:
         src, tgt = (LANDMARKS, LANDMARKS) if landmarks is True else landmarks
         argv += ["--landmarks", f"{','.join(map(str, src))}:{','.join(map(str, tgt))}"]

@@ -19,7 +19,9 @@ the docs' 5 landmark pairs and without landmarks; ``Δ`` is the accuracy (share 
 area labelled right) minus the clean pair's, in points, for the same landmarks; the pyFM margin
 is our accuracy minus pyFM's pipeline on the same mesh and landmarks (``--pyfm``; pyFM reads no
 point clouds).  ``--draw D`` takes other draws of the noise, the holes' centres, the clouds'
-points and the large scan (the held-out check: D = 0 is the draw the defaults were measured on).
+points and the large scan, and another cut for the partial target (``bench_scans_holes``'s
+``PARTIAL_CUTS[D mod 3]``: the left forearm and hand and the right foot, the mirror cut, the left
+leg from the knee down); the held-out check: D = 0 is the draw the defaults were measured on.
 
 Each part writes ``OUT/<part>.md`` and ``OUT/<part>.json`` (atomically) as it ends; the summary
 ``OUT/summary.md`` (and ``--figure``: a PNG of every Δ against its bar) is made from all the part
@@ -60,7 +62,7 @@ def run_part(part: str, data, folder, pairs, draw: int, pyfm: bool) -> list[dict
         import bench_scans_holes
 
         return bench_scans_holes.run(data, folder, pairs, seeds=(2 * draw, 2 * draw + 1),
-                                     pyfm=pyfm)
+                                     pyfm=pyfm, cut=draw % len(bench_scans_holes.PARTIAL_CUTS))
     if part == "clouds":
         import bench_point_clouds
 
@@ -141,7 +143,8 @@ def summary(parts: dict) -> str:
     """The bars against the worst draw of each case, as Markdown."""
     recs = deltas(parts)
     names = {"noise": "noise, σ ≤ 0.25 % of the height", "holes": "2–8 holes of radius 3.5 %",
-             "partial": "left forearm + hand and right foot removed",
+             "partial": next((r["target"] for r in parts.get("holes", [])
+                              if "removed" in r["target"]), "a limb part removed"),
              "clouds": f"noisy point cloud, {CLOUD_POINTS // 1000}K points",
              "large": "raw-scan-like mesh, ~105K vertices"}
     lines = ["| scan-like target | targets | bar with 5 landmarks: worst Δ (met) | bar without: "

@@ -7,7 +7,8 @@ From FAUST registrations with the SMPL 24 parts to FAUST targets made scan-like,
   (``k ∈ {2, 5, 8}``); the vertices inside are removed from the file, with every triangle that
   uses one, and so are the vertices no kept triangle uses;
 * **partial**: one arm from the elbow down (SMPL ``leftForeArm``, ``leftHand``,
-  ``leftHandIndex1``) and one foot (``rightFoot``, ``rightToeBase``) removed from the file.
+  ``leftHandIndex1``) and one foot (``rightFoot``, ``rightToeBase``) removed from the file
+  (``run(..., cut=1)``: the mirror cut; ``cut=2``: the left leg from the knee down).
 
 The target is a genuinely smaller mesh (its vertices in their original order, renumbered).
 Truth: the SMPL labels of the kept vertices; accuracy: the share of the holed / partial
@@ -30,6 +31,12 @@ import _harness as h
 
 #: SMPL parts removed from the partial targets: the left arm from the elbow down, the right foot.
 PARTIAL_PARTS = ("leftForeArm", "leftHand", "leftHandIndex1", "rightFoot", "rightToeBase")
+#: The cuts of the held-out draws (``bench_scans.py --draw D`` takes cut ``D mod 3``): the
+#: mirror cut, and the left leg from the knee down; each with its name.
+PARTIAL_CUTS = ((PARTIAL_PARTS, "left forearm + hand and right foot removed"),
+                (("rightForeArm", "rightHand", "rightHandIndex1", "leftFoot", "leftToeBase"),
+                 "right forearm + hand and left foot removed"),
+                (("leftLeg", "leftFoot", "leftToeBase"), "left shin and foot removed"))
 #: Hole radius, as a fraction of the target's height.
 RADIUS = 0.035
 PAIRS = ((0, 10), (1, 11), (2, 12))
@@ -90,10 +97,10 @@ def make_target(data, folder, tgt: int, kind: str, k: int = 0, seed: int = 0,
         height = float(np.ptp(np.asarray(mesh.vertices)[:, 1]))
         remove = hole_mask(mesh, k, radius * height, [tgt, k, seed])
         name = f"{k} holes, r = {100 * radius:.1f} %, seed {seed}"
-    elif kind == "partial":
+    elif kind == "partial":  # (k: which of PARTIAL_CUTS)
         names = part_names(data)
-        remove = np.isin(labels, [names.index(p) for p in PARTIAL_PARTS])
-        name = "left forearm + hand and right foot removed"
+        parts, name = PARTIAL_CUTS[k] if k else (PARTIAL_PARTS, PARTIAL_CUTS[0][1])
+        remove = np.isin(labels, [names.index(p) for p in parts])
     else:
         raise ValueError(f"kind must be 'holes' or 'partial', got {kind!r}")
     v, f, kept = submesh(mesh, remove)
@@ -121,7 +128,8 @@ def missing_report(err: str) -> str:
 
 
 def run(data, folder, pairs=PAIRS, ks=(2, 5, 8), seeds=(0, 1), partial: bool = True,
-        landmark_free: bool = True, pyfm: bool = False, radius: float = RADIUS) -> list[dict]:
+        landmark_free: bool = True, pyfm: bool = False, radius: float = RADIUS,
+        cut: int = 0) -> list[dict]:
     """One row per (pair, target): ``pair``, ``target``, ``clean_lm`` / ``clean_free`` (the
     clean pair), ``lm`` / ``free`` (the scan-like target), ``pyfm``, ``missing`` (the parts the
     command reported without a counterpart, with landmarks) and the seconds of each run."""
@@ -135,7 +143,7 @@ def run(data, folder, pairs=PAIRS, ks=(2, 5, 8), seeds=(0, 1), partial: bool = T
     rows = []
     for src, tgt in pairs:
         source = str(h.Path(data) / "faust" / f"tr_reg_{src:03d}.off")
-        specs = [("holes", k, s) for k in ks for s in seeds] + ([("partial", 0, 0)] if partial
+        specs = [("holes", k, s) for k in ks for s in seeds] + ([("partial", cut, 0)] if partial
                                                                  else [])
         clean = make_target(data, folder, tgt, "holes", 0, 0)  # (nothing removed)
         targets = [("clean", clean)] + [(spec, make_target(data, folder, tgt, *spec, radius))

@@ -37,25 +37,7 @@ N_TRUE = 50
 
 def _run(source, target, lab_file, out, extra, landmarks=None):
     """``bsfjax transfer`` in this process with extra arguments: the labels written."""
-    import contextlib
-    import io
-    import warnings
-
-    import numpy as np
-
-    from bsfjax.cli import main
-
-    argv = ["transfer", source, target, "--labels", lab_file, "--out", out] + extra
-    if landmarks is not None:
-        argv += ["--landmarks", f"{','.join(map(str, landmarks[0]))}:"
-                                f"{','.join(map(str, landmarks[1]))}"]
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        rc = main(argv)
-    if rc:
-        raise RuntimeError(f"bsfjax transfer failed ({rc}): {err.getvalue()}")
-    return np.loadtxt(out, dtype=np.int64)
+    return h.run_cli(source, target, lab_file, out, landmarks or False, True, extra)[0]
 
 
 def exact_fmap(source: str, target: str, gt, k: int):

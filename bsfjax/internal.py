@@ -18,8 +18,8 @@ from ._spectral import (
     cotangent_stiffness, has_cholmod, interval_operators, mass_matrix,
 )
 from ._maps import (
-    OrientationBasis, hks_times, nearest_neighbors, orientation_bases, refinement_sizes,
-    wks_energies,
+    GUIDE_WEIGHT, OrientationBasis, estimate_size, guided_zoomout, hks_times, landmark_geodesics,
+    nearest_neighbors, orientation_bases, refinement_sizes, wks_energies,
 )
 from ._frame import (
     ADAPTIVE_N_SCALES, DENSE_BUDGET_BYTES, decode_host, decode_traced, effective_taus,
@@ -56,6 +56,7 @@ __all__ = [
     "one_blas_thread", "orientation_bases", "pack_lists", "product_basis", "refinement_sizes",
     "run_demo", "sample_surface", "size_bucket", "sparse_atoms", "sparse_gram", "subdivide",
     "unique_atoms", "vertex_areas", "wks_energies", "write_text_atomic",
+    "GUIDE_WEIGHT", "estimate_size", "guided_zoomout", "landmark_geodesics",
 ]
 __all__ += ["CLOUD_DESCRIPTOR_WEIGHT", "CloudSurface", "method_for_shapes", "mesh_threshold",
             "surface_for_map"]

@@ -8,7 +8,7 @@ import pytest
 
 import bsfjax
 from bsfjax import BSFError, transfer_collection
-from bsfjax.internal import size_bucket
+from bsfjax.internal import estimate_size, size_bucket
 from bsfjax.internal import BUCKET_FACTORS
 
 
@@ -106,8 +106,9 @@ def _one_pair_maps(small, targets, lm):
     sm = bsfjax.spectrum(small.source, 100)
     for i, t in enumerate(targets):
         sn = bsfjax.spectrum(t, 100)
+        k_map = estimate_size(10, 100, lm.get(i) is not None)  # with landmarks: guided to 100
         yield i, t, sm, sn, bsfjax.estimate_map(
-            sm.truncate(20), sn.truncate(20), k=10, refine_to=20, landmarks=lm.get(i),
+            sm.truncate(k_map), sn.truncate(k_map), k=10, refine_to=k_map, landmarks=lm.get(i),
             source_mesh=small.source, target_mesh=t, zoomout_samples=300)
 
 
@@ -253,9 +254,11 @@ def test_targets_in_other_units():
     res = dict(transfer_collection(small.source, small.labels, targets, landmarks=[lm] * 3,
                                    method="refined", k=10, zoomout_samples=300))
     for i, s in ((1, 1e3), (2, 1e-3)):
-        assert np.mean(res[i].p2p == res[0].p2p) > 0.98, s  # float32 near-ties aside
+        # float32 near-ties aside (with landmarks ZoomOut runs to all 100 eigenpairs of this
+        # 506-vertex mesh on 300 samples: 92-98 % of the point map equal, the labels all)
+        assert np.mean(res[i].p2p == res[0].p2p) > 0.9, s
         assert np.mean(res[i].labels == res[0].labels) > 0.98, s
-        np.testing.assert_allclose(res[i].C / s, res[0].C, atol=2e-3)
+        np.testing.assert_allclose(res[i].C / s, res[0].C, atol=5e-3)
     assert np.mean(res[0].labels == small.labels) > 0.9  # (vertex i ↔ vertex i)
 
 

@@ -49,10 +49,13 @@ def test_estimate_map_without_landmarks_uses_the_orientation_term(small_pair):
                                        target_mesh=pair.target)):  # one start, and the default
         acc = np.sum(mass * (pair.labels[est.p2p] == pair.labels[gt])) / mass.sum()
         assert acc > 0.95
-    with_lm = estimate_map(sm, sn, k=20, refine_to=40, landmarks=([0], [0]),
-                           source_mesh=pair.source, target_mesh=pair.target)
     ref = estimate_map(sm, sn, k=20, refine_to=40, landmarks=([0], [0]))
-    np.testing.assert_array_equal(with_lm.C, ref.C)  # with landmarks the meshes are unused
+    unguided = MapEstimator(k=20, refine_to=40, landmark_guidance=0.0)(
+        sm, sn, ([0], [0]), source_mesh=pair.source, target_mesh=pair.target)
+    np.testing.assert_array_equal(unguided.C, ref.C)  # with landmarks: no orientation term
+    guided = estimate_map(sm, sn, k=20, refine_to=40, landmarks=([0], [0]),
+                          source_mesh=pair.source, target_mesh=pair.target)
+    assert not np.allclose(guided.C, ref.C)  # but the meshes guide ZoomOut (test_guide.py)
 
 
 def test_estimate_map_without_landmarks_keeps_the_best_start(small_pair):
@@ -113,7 +116,9 @@ def test_estimate_map_without_landmarks_reads_landmarks_off_its_map(small_pair):
     src = np.asarray(bsfjax.farthest_point_sampling(pair.source, 12))
     v = np.asarray(pair.source.vertices)
     near = np.argmin(np.linalg.norm(v[first.p2p][None] - v[src][:, None], axis=2), axis=1)
-    given = estimate_map(sm, sn, k=20, refine_to=40, landmarks=(src, near), **meshes)
+    # (phase 3 runs phase 1 unguided: the landmark guidance is for given landmarks)
+    given = MapEstimator(k=20, refine_to=40, landmark_guidance=0.0)(sm, sn, (src, near),
+                                                                   **meshes)
     maps = np.stack([first.p2p, given.p2p])
     keep = bsfjax.choose_map(bsfjax.map_distortion(pair.source, pair.target, maps),
                              bsfjax.orientation_agreement(pair.source, pair.target, maps))
@@ -385,7 +390,7 @@ def test_estimate_map_is_the_estimator_with_its_defaults(small_pair):
     assert not np.array_equal(wider.C_initial, est.C_initial)
     np.testing.assert_array_equal(
         wider.C, estimate_map(sm, sn, k=20, refine_to=40, landmarks=(lm, lm),
-                              starts=((20, 3.5),)).C)
+                              starts=((20, 3.5),), **meshes).C)
     step = MapEstimator(k=20, refine_to=40, zoomout_step=1)(sm, sn, (lm, lm))
     np.testing.assert_array_equal(
         step.p2p, estimate_map(sm, sn, k=20, landmarks=(lm, lm), refine_to=40,

@@ -151,6 +151,11 @@ def _transfer_one(args) -> int:
         from .._maps import REFINE_EIGENPAIRS
 
         k_spec = min(max(k_spec, REFINE_EIGENPAIRS), kmax)
+    if kind == "estimate":  # guided by landmarks: to the spectra's size (estimate_size)
+        from .._maps import estimate_size, guidable
+
+        k_map = estimate_size(k, k_spec, landmarks is not None and
+                              guidable(source, target, map_estimator(args, k)))
     if kind == "p2p":  # read and checked before the spectra, so a bad file costs nothing
         p2p = _read_array(rest[0], "p2p", dtype=int)
         if p2p.shape != (body.n_file_rows,):

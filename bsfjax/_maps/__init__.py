@@ -20,6 +20,8 @@ from ._fmap import (
     check_samples, chunk_for, default_chunk, fmap_from_p2p, fmap_to_p2p, icp_refine,
     nearest_neighbors, zoomout,
 )
+from ._guide import (GUIDE_WEIGHT, estimate_size, guidable, guided_zoomout,
+                     landmark_geodesics)
 from ._orientation import OrientationBasis, face_geometry, orientation_bases
 from ._refine import (
     REFINE_EIGENPAIRS, check_options, refine_core, refine_point_maps, refinement_sizes,
@@ -27,9 +29,10 @@ from ._refine import (
 )
 
 __all__ = [
-    "FmapWeights", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
+    "FmapWeights", "GUIDE_WEIGHT", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
     "StageConfig", "check_fmap_memory", "check_landmark_pairs", "check_options", "check_samples",
     "check_starts", "choose_map", "chunk_for", "default_chunk", "estimate_fmap", "estimate_map",
+    "estimate_size", "guidable", "guided_zoomout", "landmark_geodesics",
     "face_geometry", "fmap_energy", "fmap_from_p2p", "fmap_to_p2p", "hks", "hks_times",
     "icp_refine", "map_distortion", "map_stage", "mirror_symmetry", "nearest_neighbors",
     "orientation_agreement", "orientation_bases", "point_map_stage", "problem_stage",

@@ -17,6 +17,7 @@ from ._fmap_problem import _setup, _Shape, _shape_ops
 from ._fmap_solve import _energy, _solve
 from ._orientation import _cast, _Geometry
 from ._fmap import _from_p2p, _size_schedule, _to_p2p, _zoomout_jit
+from ._guide import guided_zoomout
 from .._sampling import Subsample
 from .._spectral import Spectrum
 
@@ -36,6 +37,7 @@ class StageConfig(NamedTuple):
     wks_variance: float
     orient_weight: float
     zoomout_step: int
+    guide_weight: float = 0.0  # the landmark guidance of ZoomOut (`bsfjax._maps._guide`)
 
 
 def spectra(rep, it):
@@ -99,16 +101,21 @@ def problem_stage(rep, it, ops_m, *, cfg: StageConfig):
                 orient_sign=1.0, ops_m=ops_m)
     zo_m, zo_n = src.evecs[:, :km].astype(dt), tgt.evecs[:, :km].astype(dt)
     w_n = tgt.mass.astype(dt)
+    g_m, g_n = it.get("guide_source"), it.get("guide_target")  # (with landmarks)
     if cfg.zoomout_chunk is not None:  # padded samples: weight 0 (no cell names them)
         idx_n = it["zo_indices"]
         w_n = Subsample(idx_n, it["zo_cells"]).weights(w_n)
         zo_m, zo_n = zo_m[rep["zo_indices"]], zo_n[idx_n]
-    return pb, (zo_m, zo_n, w_n)
+        if g_m is not None:
+            g_m, g_n = g_m[rep["zo_indices"]], g_n[idx_n]
+    guide = None if g_m is None else (g_m.astype(dt), g_n.astype(dt))
+    return pb, (zo_m, zo_n, w_n, guide)
 
 
 def map_stage(pb, zo, *, cfg: StageConfig):
     """The functional map: the estimate ``C₀`` (``k × k``), then ZoomOut ``k → k_map`` in steps
-    of ``cfg.zoomout_step`` on the subsamples, as [`MapEstimator`][bsfjax.MapEstimator].  Free of the vertex
+    of ``cfg.zoomout_step`` on the subsamples (guided by the landmarks' distances when the
+    target carries them), as [`MapEstimator`][bsfjax.MapEstimator].  Free of the vertex
     count when ZoomOut runs on subsamples."""
     dt = jnp.result_type(float)
     rtol, atol = (1e-10, 1e-12) if dt == jnp.float64 else (1e-4, 1e-6)
@@ -116,10 +123,13 @@ def map_stage(pb, zo, *, cfg: StageConfig):
     k, km = cfg.k, cfg.k_map
     if km <= k:
         return C0
-    zo_m, zo_n, w_n = zo
+    zo_m, zo_n, w_n, guide = zo
     step = cfg.zoomout_step
     sizes = _size_schedule(k, km, step, -(-(km - k) // step))
     chunk = cfg.chunk if cfg.zoomout_chunk is None else cfg.zoomout_chunk
+    if guide is not None and cfg.guide_weight > 0:  # as MapEstimator with given landmarks
+        return guided_zoomout(C0, zo_m, zo_n, w_n, *guide, sizes=sizes, chunk=chunk,
+                              weight=cfg.guide_weight)
     return _zoomout_jit(C0, zo_m, zo_n, w_n, sizes_n=sizes, sizes_m=sizes, chunk=chunk,
                         adjoint=False)
 

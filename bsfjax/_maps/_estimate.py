@@ -79,6 +79,7 @@ class Problem:
     rows: np.ndarray | None
     faces: np.ndarray | None
     k_bases: int  # the largest k₀ of the estimates that use the orientation bases
+    masses: tuple = ()  # the given spectra's vertex areas (the landmark guidance's units)
     _bases: object = None
     _geodesics: tuple | None = None
 

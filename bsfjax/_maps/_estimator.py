@@ -18,6 +18,7 @@ from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pa
     check_starts, check_symmetry, to_given
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
+from ._guide import GUIDE_WEIGHT, estimate_zoomout, guidable
 from ._proxy import needs_proxy, proxy_estimate
 from ._turn import check_sizes, descriptors, landmarks_from_map, selection_rows, self_map, \
     turn_choice, turn_landmark_sets
@@ -118,6 +119,9 @@ class MapEstimator(eqx.Module):
       [`bsfjax.map_distortion`][bsfjax.map_distortion], 100).
     - `fit_scale`: phases 2–4 take the global distortion up to a bounded scale (``True``;
       [`map_distortion`][bsfjax.map_distortion]'s ``fit_scale``: bodies of other builds).
+    - `landmark_guidance`: with given landmarks and the meshes, ZoomOut also compares geodesic
+      distances to them, at this weight falling to 0 at ``refine_to`` (1.5; 0:
+      plain ZoomOut; `bsfjax._maps._guide`: a cut foot no longer draws the leg into it).
     - `derived_landmarks`: landmark pairs of phase 3 (20; 0: no phase 3).  SMPL-part accuracy
       of the pull-back on the 9 pairs: 92.57 % with none, 94.40 % with 10, 94.47 % with 20
       (94.46 % with 5 true landmarks).
@@ -131,20 +135,15 @@ class MapEstimator(eqx.Module):
       samples (200), over their pairs closer than this (0.15, at unit area).
     - `selection_vertices`, `selection_faces`: above this many target vertices (20000) the
       candidates are compared at the corners of this many random faces (4096: the
-      orientation agreement's standard error below 0.01) and the distortions' samples.  On
-      TOSCA cat subdivided once (111.5K vertices) 146 s instead of 357 s, the same start
-      kept and the same geodesic error (docs/benchmarks.md).
+      orientation agreement's standard error below 0.01) and the distortions' samples
+      (TOSCA cat subdivided once, 111.5K vertices: 146 s instead of 357 s, the same map).
     - `proxy_above`, `proxy_vertices`: without landmarks, when the source or the target has
       more than ``proxy_above`` vertices (20000; ``None``: never), phases 2–4 run on proxies
-      of about ``proxy_vertices`` vertices (10000) of the meshes above it
-      ([`bsfjax.decimate`][bsfjax.decimate]), and the kept proxy map is carried back: composed
-      with the nearest proxy vertex, its ``k × k`` functional map on the given spectra, ZoomOut
-      to ``refine_to`` and the point map over every vertex (`bsfjax._maps._proxy`).
-      ``MapEstimate.proxy`` gives the proxies' sizes.  Clean FAUST meshes (6890 vertices) are
-      below it.  TOSCA cat subdivided once (111.5K vertices): 1.58 GB peak instead of 5.30,
-      geodesic error 0.0340 (0.0339 on the whole meshes); a ~105K-vertex raw-scan-like FAUST
-      target, the whole ``bsfjax transfer``: 94.8 % right (clean pair 97.0 %), 1.4 GB, 70 CPU
-      seconds (docs/benchmarks.md).
+      of about ``proxy_vertices`` vertices (10000; [`bsfjax.decimate`][bsfjax.decimate]), and
+      the kept proxy map is carried back (`bsfjax._maps._proxy`: the nearest proxy vertex,
+      its ``k × k`` map on the given spectra, ZoomOut to ``refine_to``).
+      ``MapEstimate.proxy`` gives the proxies' sizes.  TOSCA cat subdivided once: 1.58 GB
+      peak instead of 5.30, the same geodesic error (docs/benchmarks.md).
     """
 
     k: int = eqx.field(static=True, default=30)
@@ -164,6 +163,7 @@ class MapEstimator(eqx.Module):
     turn_landmarks: int = eqx.field(static=True, default=5)
     turn_candidates: str = eqx.field(static=True, default="limbs")
     fit_scale: bool = eqx.field(static=True, default=True)
+    landmark_guidance: float = eqx.field(static=True, default=GUIDE_WEIGHT)
     turn_samples: int = eqx.field(static=True, default=200)
     turn_radius: float = eqx.field(static=True, default=0.15)
     selection_vertices: int = eqx.field(static=True, default=20000)
@@ -172,8 +172,7 @@ class MapEstimator(eqx.Module):
     proxy_vertices: int = eqx.field(static=True, default=10000)
 
     def __check_init__(self):
-        # (k, refine_to, n_energies, starts and zoomout_samples are checked against the
-        # shapes when called)
+        # (k, refine_to, n_energies, starts, zoomout_samples: checked against the shapes)
         check_int(self.zoomout_step, "zoomout_step", 1)
         check_int(self.derived_landmarks, "derived_landmarks", 0)
         if not isinstance(self.turn_check, (bool, np.bool_)):
@@ -193,6 +192,8 @@ class MapEstimator(eqx.Module):
         if self.proxy_above is not None:
             check_int(self.proxy_above, "proxy_above", 0)
         check_int(self.proxy_vertices, "proxy_vertices", 4)
+        if check_real(self.landmark_guidance, "landmark_guidance") < 0:
+            raise BSFError(f"landmark_guidance must be >= 0, got {self.landmark_guidance!r}")
 
     @on_one_blas_thread
     def __call__(self, source: Spectrum, target: Spectrum, landmarks=None, *, source_mesh=None,
@@ -237,9 +238,9 @@ class MapEstimator(eqx.Module):
         if len(starts) > 1 and needs_proxy(self, source_mesh, target_mesh):  # a large mesh
             return proxy_estimate(self, source, target, source_mesh, target_mesh, refine_to,
                                   samples, source_symmetry)
-        # the estimation runs on the unit-area shapes (float64 rescaling before any float32
-        # cast); the maps are converted back to the given bases at the end
+        # on the unit-area shapes (float64 before any float32 cast), back in the given bases
         source_given = source  # (mirror_symmetry checks its mesh against the given spectrum)
+        masses = (source.mass, target.mass)  # (the landmark guidance's units)
         source, am, target, an = unit_area_pair(source, target)
         if samples is not None:  # (the collection's, computed once)
             samples = check_pair_samples(samples, source.n_vertices, target.n_vertices)
@@ -250,8 +251,8 @@ class MapEstimator(eqx.Module):
         # they are compared, and the kept one over every vertex at the end
         rows, faces = selection_rows(self, target_mesh) if len(starts) > 1 else (None, None)
         pb = Problem(source, target, source_mesh, target_mesh, refine_to, samples, rows, faces,
-                     max(k0 for k0, _ in starts + (single,)))
-        runs = [self._estimate(pb, s, lm) for s in starts]
+                     max(k0 for k0, _ in starts + (single,)), masses)
+        runs = [self._estimate(pb, s, lm, guided=lm is not None) for s in starts]
         run, quality = runs[0], {}
         if len(runs) > 1:
             run, quality = self._choose_start(pb, starts, runs)
@@ -274,14 +275,11 @@ class MapEstimator(eqx.Module):
         ``refine_to``, then the point map: the self-map of phase 1 with the orientation term
         turned around.
 
-        A mirror image reverses the orientation of every triangle.  Where this self-map keeps
-        it on more than ``orientation_slack`` of the area, the estimate has fallen part of the
-        way to the identity, which the descriptors favour (FAUST ``tr_reg_002``: 33 % kept,
-        57 % of the area on its own part).  It is then estimated from every start of
-        ``landmark_free_starts`` as well, and [`bsfjax.choose_map`][bsfjax.choose_map] keeps the
-        one of least geodesic distortion among those that reverse the orientation best.  On
-        the FAUST registrations the result maps each SMPL part to its mirror part on 97–99 %
-        of the area, on the FAUST_5k remeshes on 93–95 %.  The turn check uses it.
+        Where it keeps the orientation on more than ``orientation_slack`` of the area (fallen
+        part of the way to the identity: FAUST ``tr_reg_002``), every start of
+        ``landmark_free_starts`` runs and [`bsfjax.choose_map`][bsfjax.choose_map] keeps the
+        least distorted of those that reverse it best.  On FAUST it maps each SMPL part to its
+        mirror part on 97–99 % of the area (FAUST_5k: 93–95 %).  The turn check uses it.
 
         **Arguments:**
 
@@ -316,11 +314,11 @@ class MapEstimator(eqx.Module):
     def _single_start(self) -> tuple:
         return (self.k, self.wks_variance)
 
-    def _estimate(self, pb: Problem, start, landmarks, orient=None) -> Run:
+    def _estimate(self, pb: Problem, start, landmarks, orient=None, guided=False) -> Run:
         """Phase 1 from ``start`` with ``landmarks`` (or ``None``): the estimate at ``k₀``,
-        ZoomOut to ``refine_to``, the point map (at ``pb.rows`` only, ``-1`` elsewhere).  The
-        orientation term is on without landmarks (with the meshes), or where ``orient`` says
-        so."""
+        ZoomOut to ``refine_to`` (``guided``: the given landmarks guide it), the point map (at
+        ``pb.rows`` only, ``-1`` elsewhere).  The orientation term is on without landmarks
+        (with the meshes), or where ``orient`` says so."""
         k0, variance = start
         extra = {}
         if pb.meshes and (landmarks is None if orient is None else orient):
@@ -331,7 +329,9 @@ class MapEstimator(eqx.Module):
                         None if landmarks is None else landmarks[i])
             for i, s in enumerate((pb.source, pb.target))), k=k0, **extra)
         C_ref = C0
-        if pb.refine_to > k0:
+        if pb.refine_to > k0 and guided and guidable(pb.source_mesh, pb.target_mesh, self):
+            C_ref = estimate_zoomout(pb, C0, landmarks, self.zoomout_step, self.landmark_guidance)
+        elif pb.refine_to > k0:
             C_ref = zoomout(C0, pb.source, pb.target, pb.refine_to, step=self.zoomout_step,
                             samples=pb.samples)
         if pb.rows is None:

@@ -35,6 +35,8 @@ def item_arrays(t, n_b: int, m_b: int, s_b: int) -> dict:
         out["p2p"] = pad_rows(np.asarray(t.p2p, np.int32), n_b)
     if t.landmarks is not None:  # the source's: in its operators (source_ops)
         out["landmarks_target"] = np.asarray(t.landmarks[1], np.int32)
+        if t.guide is not None:  # ZoomOut's landmark distances (bsfjax._maps._guide)
+            out["guide_source"], out["guide_target"] = t.guide[0], pad_rows(t.guide[1], n_b)
     else:
         out.update(geometry_arrays(t.mesh, m_b))
     return out

@@ -52,7 +52,8 @@ from .._util import BSFError
 from .._maps import face_geometry
 from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
-from .._maps import MapEstimator, check_starts
+from .._maps import (MapEstimator, check_starts, estimate_size, guidable,
+                     landmark_geodesics)
 from ._face_labels import decide_face_labels, face_label_shares
 from ._collection_rows import (body_result, collection_estimator, file_row_results,
                                landmark_lookup, missing_parts, on_body, source_values,
@@ -130,6 +131,7 @@ class _Target(NamedTuple):
     parts: MainBody | None = None  # the whole target: `mesh` is its (denoised) main body
     denoised: int = 0  # the Taubin iterations run on the main body
     fill: HoleFill | None = None  # the holes closed for its spectrum (`mesh` has them)
+    guide: tuple | None = None  # with landmarks: ZoomOut's guidance (landmark_geodesics)
 
 
 def _as_mesh(target) -> Mesh:
@@ -209,8 +211,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     Yields ``(index, result)`` as batches finish (grouped by size bucket, so not in order);
     ``dict(transfer_collection(...))`` collects them.  Each result equals, up to float
-    round-off, [`bsfjax.estimate_map`][bsfjax.estimate_map] (``k``, ZoomOut to ``2k``, the same landmarks or
-    the orientation term) followed by [`bsfjax.transfer_labels`][bsfjax.transfer_labels] with ``method``, as
+    round-off, [`bsfjax.estimate_map`][bsfjax.estimate_map] (``k``, ZoomOut to ``2k``; with landmarks, guided by
+    them to the spectra's size) followed by [`bsfjax.transfer_labels`][bsfjax.transfer_labels] with ``method``, as
     ``bsfjax transfer`` runs them.
 
     **Arguments:**
@@ -373,9 +375,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             est = estimator(src_spec.truncate(k_map), spec.truncate(k_map), source_mesh=src_geometry,
                             target_mesh=mesh, samples=None if sub is None else (sub_m, sub),
                             source_symmetry=source_symmetry())
+        guide = None if lm is None or not guidable(source, mesh, estimator) else \
+            landmark_geodesics(source, mesh, lm, (src_spec.mass, spec.mass))
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
-                       None if est is None else est.turn_doubtful, parts, n_it, prep.fill)
+                       None if est is None else est.turn_doubtful, parts, n_it, prep.fill,
+                       guide)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -396,10 +401,11 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     def launch(key, group: list[_Target]):
         """Dispatch a group (not awaited: the next target's eigensolve runs meanwhile)."""
-        n_b, m_b, p, s_b = key
-        cfg = StageConfig(method, k, k_map, k_spec, n_energies, p, chunk, zo_chunk,
-                          estimator.wks_variance, estimator.orient_weight,
-                          estimator.zoomout_step)
+        (n_b, m_b, p, s_b), guided = key
+        cfg = StageConfig(method, k, estimate_size(k, k_spec, guided), k_spec,
+                          n_energies, p, chunk, zo_chunk, estimator.wks_variance,
+                          estimator.orient_weight, estimator.zoomout_step,
+                          estimator.landmark_guidance)
         if p not in on_device:
             src_arrays = cast_tree(dict(rep, **(rep_orient if p == 0 else {})))
             on_device[p] = [jax.device_put(src_arrays, dev) for dev in devices]
@@ -476,7 +482,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 raise
             yield i, exc
             continue
-        key = _bucket_key(tg, pad, tg.landmarks is None, zoomout_samples, merged)
+        key = (_bucket_key(tg, pad, tg.landmarks is None, zoomout_samples, merged),
+               tg.guide is not None)  # (guided: ZoomOut to k_spec, estimate_size)
         pending.setdefault(key, []).append(tg)
         if len(pending[key]) == len(devices) * batch:  # `batch` targets per device
             launched = launch(key, pending.pop(key))

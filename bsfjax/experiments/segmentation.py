@@ -8,8 +8,8 @@ folder's ``corres/sampleID.vts`` (template vertex of each ``.vts`` entry), a ver
 entry taking the label of its Euclidean-nearest named vertex.
 
 For each pair and each of three maps — ``default`` (what ``bsfjax transfer`` estimates: WKS +
-5 landmarks by Euclidean FPS on the source with their ground-truth images, k = 30, ZoomOut to
-60 on 2000 samples per shape), ``crude`` (k = 20, no refinement, same landmarks) and ``truth`` (the ground-truth point
+5 landmarks by Euclidean FPS on the source with their ground-truth images, k = 30, ZoomOut
+guided by them to 100 on 2000 samples per shape), ``crude`` (k = 20, no refinement, same landmarks) and ``truth`` (the ground-truth point
 map and its functional map) — and, when asked for, two maps without landmarks (``no
 landmarks``: what ``bsfjax transfer`` estimates without ``--landmarks``, several starts and
 landmarks read off the kept map; ``no landmarks, one start``: the single start at k = 30 with
@@ -36,7 +36,7 @@ from tqdm.auto import tqdm
 from .._util import BSFError
 from .._maps import fmap_from_p2p
 from .._pipeline import transfer_labels
-from .._maps import MapEstimator, estimate_map
+from .._maps import MapEstimator, estimate_map, estimate_size, guidable
 from .._mesh import load_labels
 from .._mesh import mesh_edges
 from .._maps import REFINE_EIGENPAIRS
@@ -143,9 +143,10 @@ def _kind(a: str, b: str) -> str:
 def _maps(sm, sn, gt, k: int, landmarks, meshes, names) -> dict:
     """``{map name: (C (k × k), p2p)}`` for the maps of the module doc named in ``names``."""
     mesh_kw = dict(source_mesh=meshes[0], target_mesh=meshes[1])
-    first = lambda n: estimate_map(sm.truncate(2 * k), sn.truncate(2 * k), k=k,  # noqa: E731
+    k_lm = estimate_size(k, min(sm.k, sn.k), guidable(*meshes, MapEstimator()))  # (as the CLI)
+    first = lambda n: estimate_map(sm.truncate(k_lm), sn.truncate(k_lm), k=k,  # noqa: E731
                                    landmarks=(landmarks[0][:n], landmarks[1][:n]),
-                                   refine_to=2 * k, **mesh_kw)
+                                   refine_to=k_lm, **mesh_kw)
     make = {
         "default": lambda: first(N_LANDMARKS),
         "1 landmark": lambda: first(1),

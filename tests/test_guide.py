@@ -1,0 +1,142 @@
+"""Landmark-guided ZoomOut (``_maps/_guide.py``): its features, its search, its continuation,
+and what it is for: a partial target whose cut leg no longer slides into the missing foot."""
+
+import jax
+import numpy as np
+import pytest
+
+import bsfjax as bj
+from bsfjax._maps._fmap import _from_p2p, _size_schedule, _zoomout_jit
+from bsfjax._maps._guide import guided_search
+from bsfjax.internal import estimate_size, guided_zoomout, landmark_geodesics, vertex_areas
+
+from .conftest import data_path
+
+#: the docs' 5 landmark vertices of the FAUST registrations (head, hands, feet)
+LANDMARKS = (412, 3216, 5907, 6296, 2445)
+
+
+def test_features_are_dijkstra_distances_at_a_fitted_scale(sphere_mesh):
+    """The features are the Dijkstra distances over √area of their shape (a scaled copy, in
+    other units: the source's), the target's times the scale σ: the smaller of the landmark
+    distances' least-squares fit and the distance quantiles' ratio (here both 1/factor when
+    the areas say the target is factor² smaller), clipped to [1/1.2, 1.2]."""
+    mass = np.asarray(vertex_areas(sphere_mesh))
+    lm = [0, 50, 200, 400]
+    ref = bj.geodesic_distances(sphere_mesh, lm).T / np.sqrt(mass.sum())
+    scaled = bj.Mesh(np.asarray(sphere_mesh.vertices) * 1000.0, sphere_mesh.faces)
+    g_m, g_n = landmark_geodesics(sphere_mesh, scaled, (lm, lm), (mass, mass * 1e6))
+    np.testing.assert_allclose(g_m, ref, rtol=1e-12)
+    np.testing.assert_allclose(g_n, ref, rtol=1e-9)
+    for factor, sigma in ((1.1, 1 / 1.1), (2.0, 1 / 1.2)):
+        _, g_n = landmark_geodesics(sphere_mesh, sphere_mesh, (lm, lm),
+                                    (mass, mass / factor**2))
+        np.testing.assert_allclose(g_n, ref * factor * sigma, rtol=1e-9)
+
+
+def test_the_smaller_scale_estimate_is_kept(sphere_mesh):
+    """σ is the smaller of the landmark fit and the median over landmarks of the ratio of the
+    distances' area-weighted 0.3-quantiles (an ellipsoid target: the two differ)."""
+    mass = np.asarray(vertex_areas(sphere_mesh))
+    v = np.asarray(sphere_mesh.vertices) * np.array([1.0, 1.0, 1.4])
+    target = bj.Mesh(v, sphere_mesh.faces)
+    mass_n = np.asarray(vertex_areas(target))
+    lm = [0, 50, 200, 400]
+    g_m = bj.geodesic_distances(sphere_mesh, lm).T / np.sqrt(mass.sum())
+    d_n = bj.geodesic_distances(target, lm).T / np.sqrt(mass_n.sum())
+
+    def quantile(x, w, q=0.3):  # the smallest value with a share q of the weight at or below
+        order = np.argsort(x)
+        return x[order][np.flatnonzero(np.cumsum(w[order]) >= q * w.sum())[0]]
+
+    fit = np.sum(g_m[lm] * d_n[lm]) / np.sum(d_n[lm] ** 2)
+    ratio = np.median([quantile(g_m[:, i], mass) / quantile(d_n[:, i], mass_n)
+                       for i in range(len(lm))])
+    assert abs(fit - ratio) > 0.01  # (the case tells them apart)
+    _, g_n = landmark_geodesics(sphere_mesh, target, (lm, lm), (mass, mass_n))
+    np.testing.assert_allclose(g_n, d_n * min(fit, ratio), rtol=1e-9)
+
+
+@pytest.mark.parametrize("x64", [False, True])
+def test_search_is_the_brute_force_nearest_neighbour(x64):
+    """One guided step against a float64 brute-force search of the stacked embeddings, the
+    weight scaled by the mean row norm over the real rows (w_n > 0) times √area."""
+    rng = np.random.default_rng(0)
+    n_m, n_n, k, L = 300, 250, 12, 4
+    phi_m, phi_n = rng.normal(size=(n_m, k)), rng.normal(size=(n_n, k))
+    C = rng.normal(size=(k, k))
+    g_m, g_n = rng.random((n_m, L)), rng.random((n_n, L))
+    w_n = rng.random(n_n)
+    w_n[:20] = 0.0  # padding rows
+    s = 0.7 * np.linalg.norm(phi_n[20:], axis=1).mean() * np.sqrt(w_n.sum())
+    ref = np.concatenate([phi_m @ C.T, s * g_m], 1)
+    qry = np.concatenate([phi_n, s * g_n], 1)
+    want = np.argmin(((qry[:, None] - ref[None]) ** 2).sum(-1), axis=1)
+    with jax.enable_x64(x64):
+        got = np.asarray(guided_search(*(jax.numpy.asarray(x) for x in
+                                         (C, phi_m, phi_n, w_n, g_m, g_n)), 0.7, chunk=64))
+    assert np.mean(got == want) >= (1.0 if x64 else 0.99)
+
+
+def test_weight_zero_is_zoomout(small_pair):
+    """With weight 0 the continuation is plain ZoomOut (the tested route), map for map."""
+    ex, sm, sn = small_pair
+    rng = np.random.default_rng(1)
+    p0 = np.where(rng.random(sn.n_vertices) < 0.2, rng.integers(0, sm.n_vertices, sn.n_vertices),
+                  np.arange(sn.n_vertices))
+    phi_m, phi_n, mass = (np.asarray(x) for x in (sm.evecs, sn.evecs, sn.mass))
+    C0 = _from_p2p(p0, phi_m[:, :20], phi_n[:, :20], mass)
+    sizes = _size_schedule(20, 40, 4, 5)
+    g = np.zeros((sm.n_vertices, 3)), np.ones((sn.n_vertices, 3))
+    guided = guided_zoomout(C0, phi_m, phi_n, mass, *g, sizes=sizes, chunk=512, weight=0.0)
+    plain = _zoomout_jit(C0, phi_m, phi_n, mass, sizes_n=sizes, sizes_m=sizes, chunk=512,
+                         adjoint=False)
+    np.testing.assert_allclose(np.asarray(guided), np.asarray(plain), atol=1e-5)
+
+
+def test_estimate_size():
+    assert estimate_size(30, 100, True) == 100  # guided to the spectra's size
+    assert estimate_size(30, 100, False) == 60  # the landmark-free choice at 2k
+    assert estimate_size(30, 50, False) == 50
+
+
+def test_negative_guidance_is_refused():
+    with pytest.raises(bj.BSFError, match="landmark_guidance"):
+        bj.MapEstimator(landmark_guidance=-1.0)
+
+
+@pytest.fixture(scope="module")
+def partial_pair():
+    """FAUST 000 and 010 without its left forearm and hand and its right foot (the scan
+    suite's partial target), prepared as ``bsfjax transfer`` does, with 100 eigenpairs."""
+    seg = bj.load_labels(data_path("segmentations", "smpl_vert_segmentation.json"))
+    truth, names = np.asarray(seg.labels), list(seg.names)
+    cut = ("leftForeArm", "leftHand", "leftHandIndex1", "rightFoot", "rightToeBase")
+    full = bj.load_mesh(data_path("faust", "tr_reg_010.off"))
+    remove = np.isin(truth, [names.index(p) for p in cut])
+    f = np.asarray(full.faces)
+    faces = f[~remove[f].any(axis=1)]
+    kept = np.unique(faces)
+    new = np.full(full.n_vertices, -1)
+    new[kept] = np.arange(kept.size)
+    target = bj.prepare_scan(bj.Mesh(np.asarray(full.vertices)[kept], new[faces])).mesh
+    source = bj.load_mesh(data_path("faust", "tr_reg_000.off"))
+    lm = [i for i in LANDMARKS if not remove[i]]
+    return (source, target, bj.spectrum(source, 100), bj.spectrum(target, 100),
+            (lm, [int(new[i]) for i in lm]), truth, kept)
+
+
+def test_guidance_keeps_a_cut_leg_in_place(partial_pair):
+    """With 4 landmarks the unguided estimate slides the shortened leg into the missing foot
+    (92.5 % of the target's area on its SMPL part); the guided one does not (95.2 %)."""
+    source, target, sm, sn, lm, truth, kept = partial_pair
+    mass = np.asarray(vertex_areas(target))[:kept.size]
+
+    def accuracy(guidance):
+        est = bj.MapEstimator(landmark_guidance=guidance)(sm, sn, lm, source_mesh=source,
+                                                          target_mesh=target)
+        right = truth[np.asarray(est.p2p)[:kept.size]] == truth[kept]
+        return float(mass[right].sum() / mass.sum())
+
+    plain, guided = accuracy(0.0), accuracy(1.5)
+    assert guided > 0.945 and guided > plain + 0.02, (plain, guided)
