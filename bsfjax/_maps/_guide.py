@@ -75,7 +75,7 @@ def guidable(source_mesh, target_mesh, estimator) -> bool:
     """Whether landmarks guide ZoomOut between these meshes: the estimator's
     ``landmark_guidance`` is on and both are triangle meshes.  A point cloud's distances run
     along its k-nearest-neighbour graph, which noise lengthens unevenly: guided, noisy 15K
-    clouds of FAUST targets labelled 0.4–1.1 points less (docs/results/scans.md)."""
+    clouds of FAUST targets labelled 0.5–1.1 points less (docs/results/scans.md)."""
     return bool(estimator.landmark_guidance) and all(
         m is not None and not getattr(m, "is_point_cloud", False)
         for m in (source_mesh, target_mesh))
