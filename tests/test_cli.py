@@ -311,6 +311,27 @@ def test_transfer_warns_when_the_turn_check_is_in_doubt(tmp_path, monkeypatch, c
         assert "no landmarks: kept start" in capsys.readouterr().err
 
 
+def test_transfer_suggests_partial_where_parts_are_missing(tmp_path, monkeypatch, capsys):
+    """Without landmarks, a transfer that reports source parts with no counterpart suggests
+    ``--partial`` (or landmarks); ``--partial`` turns on ``derived_guidance`` and is not
+    suggested again."""
+    import bsfjax._cli._transfer as cli_transfer
+    d = tmp_path / "ex"
+    assert main(["example", "--out", str(d), "--levels", "2"]) == 0
+    args = ["transfer", str(d / "source.ply"), str(d / "target.ply"), "--labels",
+            str(d / "labels.txt"), "-k", "20", "--out", str(tmp_path / "out.txt")]
+    real_line, real_est = cli_transfer.missing_line, cli_transfer.map_estimator
+    made = []
+    monkeypatch.setattr(cli_transfer, "missing_line",
+                        lambda *a, **kw: (real_line(*a, **kw)[0], 1))  # (one part missing)
+    monkeypatch.setattr(cli_transfer, "map_estimator",
+                        lambda *a: made.append(real_est(*a)) or made[-1])
+    for extra, hint in (([], True), (["--partial"], False)):
+        assert main(args + extra) == 0
+        assert (cli_transfer.PARTIAL_HINT in capsys.readouterr().err) == hint
+    assert {e.derived_guidance for e in made} == {False, True}
+
+
 def doubting(estimator, doubt: bool):
     """The estimator, its maps' turn check in doubt (or not)."""
     import dataclasses

@@ -7,7 +7,7 @@ import pytest
 
 import bsfjax as bj
 from bsfjax._maps._fmap import _from_p2p, _size_schedule, _zoomout_jit
-from bsfjax._maps._guide import guided_search
+from bsfjax._maps._guide import guided_search, unguided_on_clouds
 from bsfjax.internal import estimate_size, guided_zoomout, landmark_geodesics, vertex_areas
 
 from .conftest import data_path
@@ -140,3 +140,40 @@ def test_guidance_keeps_a_cut_leg_in_place(partial_pair):
 
     plain, guided = accuracy(0.0), accuracy(1.5)
     assert guided > 0.945 and guided > plain + 0.02, (plain, guided)
+
+
+def test_clouds_run_unguided(sphere_mesh):
+    est = bj.MapEstimator()
+    cloud = bj.PointCloud(np.asarray(sphere_mesh.vertices))
+    assert unguided_on_clouds(est, sphere_mesh, sphere_mesh) is est
+    assert unguided_on_clouds(est, sphere_mesh, cloud).landmark_guidance == 0.0
+    assert unguided_on_clouds(est, cloud, sphere_mesh).k == est.k
+
+
+def test_guided_to_is_checked(small_pair):
+    _, sm, sn = small_pair
+    with pytest.raises(bj.BSFError, match="guided_to must be an integer"):
+        bj.MapEstimator(k=10, guided_to=10_000)(sm, sn, ([0, 1], [0, 1]))
+
+
+def test_derived_landmarks_guide_a_partial_target_without_landmarks(partial_pair):
+    """Without landmarks, ``derived_guidance`` also runs the estimates with landmark pairs
+    read off a map guided by them; the choice keeps the guided one on the cut target, whose
+    arm and leg stay in place (as ``bsfjax transfer --partial``: ZoomOut to 60, guided to
+    100)."""
+    source, target, sm, sn, _, truth, kept = partial_pair
+    mass = np.asarray(vertex_areas(target))[:kept.size]
+
+    def accuracy(derived_guidance):
+        est = bj.MapEstimator(refine_to=60, derived_guidance=derived_guidance)(
+            sm, sn, source_mesh=source, target_mesh=target)
+        right = truth[np.asarray(est.p2p)[:kept.size]] == truth[kept]
+        return float(mass[right].sum() / mass.sum())
+
+    plain, guided = accuracy(False), accuracy(True)
+    assert guided > 0.93 and guided > plain + 0.02, (plain, guided)
+
+
+def test_derived_guidance_is_checked():
+    with pytest.raises(bj.BSFError, match="derived_guidance must be True or False"):
+        bj.MapEstimator(derived_guidance=1)

@@ -11,6 +11,7 @@ is numbered by the rows of its mesh file, not by the vertices its reader kept
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from pathlib import Path
 
@@ -182,13 +183,14 @@ def coloured_data(result, labels: bool) -> dict:
 def map_estimator(args, k: int, refine_to: int | None = None):
     """The [`MapEstimator`][bsfjax.MapEstimator] of ``bsfjax transfer``: at ``k`` (ZoomOut to
     ``refine_to``), its single start ``(k, wks_variance)`` with ``--one-start``, else its
-    default starts."""
+    default starts; ``--partial``: ``derived_guidance``."""
     from .._maps import MapEstimator
 
-    default = MapEstimator(k=k, refine_to=refine_to)
+    default = MapEstimator(k=k, refine_to=refine_to,
+                           derived_guidance=bool(getattr(args, "partial", False)))
     if not args.one_start:
         return default
-    return MapEstimator(k=k, refine_to=refine_to, starts=((k, default.wks_variance),))
+    return dataclasses.replace(default, starts=((k, default.wks_variance),))
 
 
 #: Said when [`bsfjax.estimate_map`][bsfjax.estimate_map]'s turn check could not tell which of its two maps is

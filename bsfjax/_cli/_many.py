@@ -131,6 +131,7 @@ class _Run:
         values = args.labels if args.labels is not None else args.function
         self.common = {"bsfjax": VERSION, "method": args.method, "k": args.k,
                        "threshold": args.threshold, "one_start": bool(args.one_start),
+                       "partial": bool(args.partial),
                        "kind": "labels" if args.labels is not None else "function",
                        "output": suffix, "source": _sha256(args.source),
                        "values": _sha256(values), "denoise": not args.no_denoise}

@@ -64,6 +64,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--one-start", action="store_true",
                    help="without landmarks: estimate the map from one start, not 15 with a "
                         "choice by geodesic distortion (16x faster, less accurate)")
+    p.add_argument("--partial", action="store_true",
+                   help="without landmarks, for a target that misses parts (a cut limb): the "
+                        "landmarks read off the first map also guide ZoomOut (slower; on clean "
+                        "pairs sometimes less accurate)")
     p.add_argument("--no-denoise", action="store_true",
                    help="use the meshes as they are (default: a noisy source or target is "
                         "smoothed before its spectrum, by Taubin iterations chosen from its "

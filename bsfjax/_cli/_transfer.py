@@ -30,10 +30,16 @@ def _parse_landmarks(text: str | None):
     return src, tgt
 
 
-def missing_line(values, result, src_prep, prep, per_face: bool, names=None) -> str:
+#: Said after the missing parts of a target matched without landmarks or ``--partial``.
+PARTIAL_HINT = ("the target misses source parts and no landmarks were given: its map may have "
+                "slid a limb into a missing part; give landmarks on what it kept, or rerun "
+                "with --partial")
+
+
+def missing_line(values, result, src_prep, prep, per_face: bool, names=None) -> tuple:
     """The line naming the source labels (parts) with no counterpart on the target (a partial
     target): [`missing_labels`][bsfjax.missing_labels] over the two bodies' own areas (the
-    vertices, triangles, as read: hole patches left out)."""
+    vertices, triangles, as read: hole patches left out); and how many there are."""
     from .._metrics import MISSING_RATIO, missing_labels
     from .._mesh import vertex_areas
 
@@ -41,7 +47,7 @@ def missing_line(values, result, src_prep, prep, per_face: bool, names=None) -> 
     gone = missing_labels(src_prep.restrict(values, faces=per_face), area(src_prep.body),
                           prep.restrict(result, faces=per_face), area(prep.body))
     return (f"source parts with no counterpart on the target (under {MISSING_RATIO:.0%} of "
-            f"their source share of the area): {part_list(gone, names)}")
+            f"their source share of the area): {part_list(gone, names)}"), len(gone)
 
 
 def _cmd_transfer(args) -> int:
@@ -151,11 +157,6 @@ def _transfer_one(args) -> int:
         from .._maps import REFINE_EIGENPAIRS
 
         k_spec = min(max(k_spec, REFINE_EIGENPAIRS), kmax)
-    if kind == "estimate":  # guided by landmarks: to the spectra's size (estimate_size)
-        from .._maps import estimate_size, guidable
-
-        k_map = estimate_size(k, k_spec, landmarks is not None and
-                              guidable(source, target, map_estimator(args, k)))
     if kind == "p2p":  # read and checked before the spectra, so a bad file costs nothing
         p2p = _read_array(rest[0], "p2p", dtype=int)
         if p2p.shape != (body.n_file_rows,):
@@ -181,15 +182,19 @@ def _transfer_one(args) -> int:
                           "mirror image or turned front to back (an orientation term and a choice "
                           "among several starts make it less likely; two landmark pairs remove "
                           "it)", stacklevel=1)
+        from .._maps import unguided_on_clouds
         from .._mesh import surface_for_map
 
         # without landmarks a point cloud gives the orientation term its stand-in surface
         shapes = ((source, target) if landmarks is not None else
                   (surface_for_map(source), surface_for_map(target)))
-        est = map_estimator(args, k, k_map)(sm.truncate(k_map), sn.truncate(k_map), landmarks,
-                                            source_mesh=shapes[0], target_mesh=shapes[1])
+        # ZoomOut to k_map; where landmarks (given, or read off a map) guide it on two
+        # triangle meshes, to every eigenpair (MapEstimator.guided_to)
+        estimator = unguided_on_clouds(map_estimator(args, k, k_map), source, target)
+        est = estimator(sm, sn, landmarks, source_mesh=shapes[0], target_mesh=shapes[1])
         C, p2p = est.C, est.p2p
-        print(f"estimated a {k}x{k} map (ZoomOut to {k_map})", file=sys.stderr)
+        print(f"estimated a {k}x{k} map (ZoomOut to {k_map}, to {k_spec} where landmarks guide "
+              "it)", file=sys.stderr)
         if est.start is not None:
             second = ("" if est.landmarks is None else
                       f", then {len(est.landmarks[0])} landmarks read off its map")
@@ -227,7 +232,10 @@ def _transfer_one(args) -> int:
         print(f"transferred {np.unique(values).size} labels "
               f"{'of triangles ' if per_face else ''}with {args.method}; unassigned: "
               f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
-        print(missing_line(values, result, src_prep, prep, per_face, names), file=sys.stderr)
+        line, n_gone = missing_line(values, result, src_prep, prep, per_face, names)
+        print(line, file=sys.stderr)
+        if n_gone and kind == "estimate" and landmarks is None and not args.partial:
+            print(PARTIAL_HINT, file=sys.stderr)
         if res.regime is not None:
             why = [] if res.agreement is None else [f"{res.agreement:.1%} of the area as the "
                                                     "input map's pull-back"]

@@ -15,13 +15,14 @@ from ._descriptors import hks, hks_times, wks, wks_energies
 from ._distortion import choose_map, map_distortion, orientation_agreement
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap, fmap_energy
 from ._estimate import MapEstimate, check_landmark_pairs, check_starts
-from ._estimator import MapEstimator, estimate_map, mirror_symmetry
+from ._estimator import MapEstimator
+from ._functions import estimate_map, mirror_symmetry
 from ._fmap import (
     check_samples, chunk_for, default_chunk, fmap_from_p2p, fmap_to_p2p, icp_refine,
     nearest_neighbors, zoomout,
 )
-from ._guide import (GUIDE_WEIGHT, estimate_size, guidable, guided_zoomout,
-                     landmark_geodesics)
+from ._guide import (DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_size, guidable, guided_zoomout,
+                     landmark_geodesics, unguided_on_clouds)
 from ._orientation import OrientationBasis, face_geometry, orientation_bases
 from ._refine import (
     REFINE_EIGENPAIRS, check_options, refine_core, refine_point_maps, refinement_sizes,
@@ -29,7 +30,7 @@ from ._refine import (
 )
 
 __all__ = [
-    "FmapWeights", "GUIDE_WEIGHT", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
+    "DERIVED_GUIDANCE", "FmapWeights", "GUIDE_WEIGHT", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
     "StageConfig", "check_fmap_memory", "check_landmark_pairs", "check_options", "check_samples",
     "check_starts", "choose_map", "chunk_for", "default_chunk", "estimate_fmap", "estimate_map",
     "estimate_size", "guidable", "guided_zoomout", "landmark_geodesics",
@@ -37,5 +38,6 @@ __all__ = [
     "icp_refine", "map_distortion", "map_stage", "mirror_symmetry", "nearest_neighbors",
     "orientation_agreement", "orientation_bases", "point_map_stage", "problem_stage",
     "refine_core", "refine_point_maps", "refinement_sizes", "sizes_for", "source_ops_stage",
+    "unguided_on_clouds",
     "spectra", "start_point_map", "wks", "wks_energies", "zoomout",
 ]

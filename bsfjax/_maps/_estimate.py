@@ -80,6 +80,7 @@ class Problem:
     faces: np.ndarray | None
     k_bases: int  # the largest k₀ of the estimates that use the orientation bases
     masses: tuple = ()  # the given spectra's vertex areas (the landmark guidance's units)
+    guided_to: int = 0  # the size of the guided ZoomOut (`bsfjax._maps._guide`)
     _bases: object = None
     _geodesics: tuple | None = None
 

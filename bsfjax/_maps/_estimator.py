@@ -1,8 +1,9 @@
 """Estimate a point map between two meshes from their spectra: the
 [`MapEstimator`][bsfjax.MapEstimator] (with landmarks, or from several starts told apart by their
-distortion and orientation, then its turn check), [`estimate_map`][bsfjax.estimate_map] that runs
-one, and the source's intrinsic [`mirror_symmetry`][bsfjax.mirror_symmetry] its turn check uses.
-What ``bsfjax transfer`` runs before it carries anything across.
+distortion and orientation, then its turn check), and the source's intrinsic
+[`mirror_symmetry`][bsfjax.MapEstimator.mirror_symmetry] its turn check uses.  What ``bsfjax
+transfer`` runs before it carries anything across; `bsfjax._maps._functions` has the function
+forms.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pa
     check_starts, check_symmetry, to_given
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
-from ._guide import GUIDE_WEIGHT, estimate_zoomout, guidable
+from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable
 from ._proxy import needs_proxy, proxy_estimate
 from ._turn import check_sizes, descriptors, landmarks_from_map, selection_rows, self_map, \
     turn_choice, turn_landmark_sets
@@ -26,9 +27,8 @@ from .._sampling import Subsample, subsample
 from .._spectral import Spectrum, unit_area_pair
 from .._util import (BSFError, check_int, check_real, check_source_mesh, on_one_blas_thread,
                      require_triangles)
-from .._mesh import as_mesh
 
-__all__ = ["MapEstimate", "MapEstimator", "estimate_map", "mirror_symmetry"]
+__all__ = ["MapEstimate", "MapEstimator"]
 
 
 class MapEstimator(eqx.Module):
@@ -60,8 +60,8 @@ class MapEstimator(eqx.Module):
        the pair.
     3. **Derived landmarks**: ``derived_landmarks`` landmark pairs read off the kept map (the
        source's farthest points, each with the target vertex whose image lies nearest), and
-       phase 1 again with them at ``(k, wks_variance)``, as if they were given; the second map
-       is kept if [`bsfjax.choose_map`][bsfjax.choose_map] prefers it.  On the 9 FAUST / FAUST_5k
+       phase 1 again with them at ``(k, wks_variance)``, as if they were given (with
+       ``derived_guidance`` also with ZoomOut guided by them); the second map is kept if [`bsfjax.choose_map`][bsfjax.choose_map] prefers it.  On the 9 FAUST / FAUST_5k
        pairs of docs/results/segmentation.md ("Without landmarks") this is as accurate as 5 true
        landmarks.
     4. **The turn check** (``turn_check``): two human shapes can also be matched turned front
@@ -119,9 +119,23 @@ class MapEstimator(eqx.Module):
       [`bsfjax.map_distortion`][bsfjax.map_distortion], 100).
     - `fit_scale`: phases 2–4 take the global distortion up to a bounded scale (``True``;
       [`map_distortion`][bsfjax.map_distortion]'s ``fit_scale``: bodies of other builds).
-    - `landmark_guidance`: with given landmarks and the meshes, ZoomOut also compares geodesic
-      distances to them, at this weight falling to 0 at ``refine_to`` (1.5; 0:
+    - `landmark_guidance`: with landmarks and two triangle meshes, ZoomOut also compares
+      geodesic distances to them, at this weight falling to 0 at ``guided_to`` (1.5; 0:
       plain ZoomOut; `bsfjax._maps._guide`: a cut foot no longer draws the leg into it).
+    - `guided_to`: the size a guided ZoomOut runs to (``None``: every eigenpair of the
+      spectra; at least ``refine_to``; ``bsfjax transfer``: 100); unguided ZoomOut stops at
+      ``refine_to``.
+    - `derived_guidance`: phases 3 and 4 also estimate with ZoomOut guided by the landmark
+      pairs read off a map (at ``DERIVED_GUIDANCE``, half, of ``landmark_guidance``, to
+      ``guided_to``; the turn check's mirror symmetry at ``guided_to`` too), beside the
+      unguided estimate, and the choice keeps one (``False``; ``bsfjax transfer
+      --partial``).  For a target that misses parts (a cut limb) and has no landmarks: on
+      the partial FAUST targets of docs/results/scans.md the labels came within 0.5–2.9
+      points of the clean pairs on 8 of 9 (before: 84.2 % on average, 7–62 points lost on
+      the first cut).  Off by default: on clean pairs the choice sometimes keeps the guided
+      estimate where it is less accurate (its distortion and orientation both better): the
+      9 pairs of docs/results/segmentation.md without landmarks 95.04 → 94.66 %, FAUST_5k
+      000→010 93.92 → 90.11 %.
     - `derived_landmarks`: landmark pairs of phase 3 (20; 0: no phase 3).  SMPL-part accuracy
       of the pull-back on the 9 pairs: 92.57 % with none, 94.40 % with 10, 94.47 % with 20
       (94.46 % with 5 true landmarks).
@@ -164,6 +178,8 @@ class MapEstimator(eqx.Module):
     turn_candidates: str = eqx.field(static=True, default="limbs")
     fit_scale: bool = eqx.field(static=True, default=True)
     landmark_guidance: float = eqx.field(static=True, default=GUIDE_WEIGHT)
+    guided_to: int | None = eqx.field(static=True, default=None)
+    derived_guidance: bool = eqx.field(static=True, default=False)
     turn_samples: int = eqx.field(static=True, default=200)
     turn_radius: float = eqx.field(static=True, default=0.15)
     selection_vertices: int = eqx.field(static=True, default=20000)
@@ -175,6 +191,9 @@ class MapEstimator(eqx.Module):
         # (k, refine_to, n_energies, starts, zoomout_samples: checked against the shapes)
         check_int(self.zoomout_step, "zoomout_step", 1)
         check_int(self.derived_landmarks, "derived_landmarks", 0)
+        if not isinstance(self.derived_guidance, (bool, np.bool_)):
+            raise BSFError(f"derived_guidance must be True or False, got "
+                           f"{self.derived_guidance!r}")
         if not isinstance(self.turn_check, (bool, np.bool_)):
             raise BSFError(f"turn_check must be True or False, got {self.turn_check!r}")
         check_real(self.wks_variance, "wks_variance", positive=True)
@@ -225,6 +244,9 @@ class MapEstimator(eqx.Module):
                                   "landmark-free map's orientation term needs triangles "
                                   "(give two or more landmark pairs)")
         refine_to = check_sizes(self.k, self.refine_to, min(source.k, target.k))
+        guided_to = max(refine_to, check_sizes(self.k, self.guided_to, min(source.k, target.k),
+                                               "guided_to"))
+        guided_to = guided_to if self.landmark_guidance else refine_to  # (nothing guided)
         lm = check_landmark_pairs(landmarks, source.n_vertices, target.n_vertices)
         meshes = source_mesh is not None and target_mesh is not None
         single = self._single_start()
@@ -251,8 +273,8 @@ class MapEstimator(eqx.Module):
         # they are compared, and the kept one over every vertex at the end
         rows, faces = selection_rows(self, target_mesh) if len(starts) > 1 else (None, None)
         pb = Problem(source, target, source_mesh, target_mesh, refine_to, samples, rows, faces,
-                     max(k0 for k0, _ in starts + (single,)), masses)
-        runs = [self._estimate(pb, s, lm, guided=lm is not None) for s in starts]
+                     max(k0 for k0, _ in starts + (single,)), masses, guided_to)
+        runs = [self._estimate(pb, s, lm, guide=self.landmark_guidance) for s in starts]
         run, quality = runs[0], {}
         if len(runs) > 1:
             run, quality = self._choose_start(pb, starts, runs)
@@ -311,14 +333,21 @@ class MapEstimator(eqx.Module):
 
     # ----------------------------------------------------------------------- the phases
 
+    def _mirror_size(self, pb: Problem) -> int:
+        """The size of the turn check's mirror symmetry: that of the derived estimates (on
+        the FAUST targets without a forearm and a foot, with ``derived_guidance``, 92.3 %
+        at 100 against 87.8 % at 60 on 001→011)."""
+        return pb.guided_to if self.derived_guidance else pb.refine_to
+
     def _single_start(self) -> tuple:
         return (self.k, self.wks_variance)
 
-    def _estimate(self, pb: Problem, start, landmarks, orient=None, guided=False) -> Run:
+    def _estimate(self, pb: Problem, start, landmarks, orient=None, guide=0.0) -> Run:
         """Phase 1 from ``start`` with ``landmarks`` (or ``None``): the estimate at ``k₀``,
-        ZoomOut to ``refine_to`` (``guided``: the given landmarks guide it), the point map (at
-        ``pb.rows`` only, ``-1`` elsewhere).  The orientation term is on without landmarks
-        (with the meshes), or where ``orient`` says so."""
+        ZoomOut to ``refine_to`` (``guide > 0``: guided by ``landmarks`` at this weight, to
+        ``guided_to``), the point map (at ``pb.rows`` only, ``-1`` elsewhere).  The
+        orientation term is on without landmarks (with the meshes), or where ``orient`` says
+        so."""
         k0, variance = start
         extra = {}
         if pb.meshes and (landmarks is None if orient is None else orient):
@@ -329,8 +358,9 @@ class MapEstimator(eqx.Module):
                         None if landmarks is None else landmarks[i])
             for i, s in enumerate((pb.source, pb.target))), k=k0, **extra)
         C_ref = C0
-        if pb.refine_to > k0 and guided and guidable(pb.source_mesh, pb.target_mesh, self):
-            C_ref = estimate_zoomout(pb, C0, landmarks, self.zoomout_step, self.landmark_guidance)
+        if (pb.guided_to > k0 and guide and landmarks is not None
+                and guidable(pb.source_mesh, pb.target_mesh, self)):
+            C_ref = estimate_zoomout(pb, C0, landmarks, self.zoomout_step, guide)
         elif pb.refine_to > k0:
             C_ref = zoomout(C0, pb.source, pb.target, pb.refine_to, step=self.zoomout_step,
                             samples=pb.samples)
@@ -362,21 +392,33 @@ class MapEstimator(eqx.Module):
         return runs[best], dict(start=starts[best], distortion=float(dist[pick]),
                                 orientation=float(orient[best]))
 
-    def _derived(self, pb: Problem, p2p) -> tuple:
-        """``derived_landmarks`` landmark pairs read off ``p2p``, and phase 1 with them."""
+    def _derived(self, pb: Problem, p2p) -> list:
+        """``derived_landmarks`` landmark pairs read off ``p2p``, and phase 1 with them: as if
+        given, and (where the guidance can run) with ZoomOut guided by them at
+        ``DERIVED_GUIDANCE`` of ``landmark_guidance`` (``derived_guidance``);
+        ``[(pairs, run), ...]``."""
         pairs = landmarks_from_map(pb.source_mesh, p2p, self.derived_landmarks)
-        return pairs, self._estimate(pb, self._single_start(), pairs)
+        guides = [0.0]
+        if (self.derived_guidance and pb.guided_to > self.k
+                and guidable(pb.source_mesh, pb.target_mesh, self)):
+            guides.append(DERIVED_GUIDANCE * self.landmark_guidance)
+        return [(pairs, self._estimate(pb, self._single_start(), pairs, guide=g))
+                for g in guides]
 
     def _second_estimate(self, pb: Problem, run: Run, quality: dict) -> tuple:
-        """Phase 3: the estimate with landmarks read off the kept map, if preferred."""
-        derived, second = self._derived(pb, run.p2p)
-        d2 = float(self._distortion(pb, second.p2p)[0])
-        o2 = float(_agreements(pb.source_mesh, pb.target_mesh, second.p2p[None],
-                               pb.faces)[0])
-        if choose_map([quality["distortion"], d2], [quality["orientation"], o2],
-                      slack=self.orientation_slack) == 1:
-            return second, dict(quality, landmarks=derived, distortion=d2, orientation=o2)
-        return run, quality
+        """Phase 3: the estimates with landmarks read off the kept map, one kept if
+        preferred."""
+        found = self._derived(pb, run.p2p)
+        runs = [run] + [r for _, r in found]
+        maps = np.stack([r.p2p for r in runs[1:]])
+        dist = [quality["distortion"], *map(float, self._distortion(pb, maps))]
+        orient = [quality["orientation"],
+                  *map(float, _agreements(pb.source_mesh, pb.target_mesh, maps, pb.faces))]
+        pick = choose_map(dist, orient, slack=self.orientation_slack)
+        if pick == 0:
+            return run, quality
+        return runs[pick], dict(quality, landmarks=found[pick - 1][0], distortion=dist[pick],
+                                orientation=orient[pick])
 
     def _check_turn(self, pb: Problem, run: Run, quality: dict, source_given: Spectrum,
                     source_symmetry) -> tuple:
@@ -385,7 +427,7 @@ class MapEstimator(eqx.Module):
         if source_symmetry is not None:
             sx = source_symmetry[x]
         else:  # the mirror images of x only (a search of len(x) rows, not of every vertex)
-            at_size = dataclasses.replace(self, refine_to=pb.refine_to)
+            at_size = dataclasses.replace(self, refine_to=self._mirror_size(pb))
             sx = at_size.mirror_symmetry(
                 source_given, pb.source_mesh,
                 samples=None if pb.samples is None else pb.samples[0], rows=x)
@@ -400,10 +442,10 @@ class MapEstimator(eqx.Module):
                 kept_sets.append(lms)
                 turn += [len(runs) - 1] if n == 0 else []
             if self.derived_landmarks:
-                derived, alt = self._derived(pb, alt.p2p)
-                runs.append(alt)
-                kept_sets.append(derived)
-                turn += [len(runs) - 1] if n == 0 else []
+                for derived, alt in self._derived(pb, alt.p2p):
+                    runs.append(alt)
+                    kept_sets.append(derived)
+                    turn += [len(runs) - 1] if n == 0 else []
         quality = dict(quality, swapped=False)
         choice = turn_choice(self, pb, runs, joint, turn)
         if choice is None:  # (a target too coarse for the local distortion keeps the map)
@@ -425,76 +467,3 @@ class MapEstimator(eqx.Module):
                                      p2p))
         return MapEstimate(C=to_given(C, am, an), p2p=p2p, C_initial=to_given(run.C0, am, an),
                            samples=pb.samples, **quality)
-
-
-_DEFAULT = MapEstimator()
-
-
-def estimate_map(source: Spectrum, target: Spectrum, *, k: int = _DEFAULT.k, landmarks=None,
-                 refine_to: int | None = _DEFAULT.refine_to,
-                 n_energies: int = _DEFAULT.n_energies, source_mesh=None, target_mesh=None,
-                 zoomout_samples: int | None = _DEFAULT.zoomout_samples,
-                 zoomout_step: int = _DEFAULT.zoomout_step, starts=_DEFAULT.starts,
-                 derived_landmarks: int = _DEFAULT.derived_landmarks,
-                 turn_check: bool = _DEFAULT.turn_check, source_symmetry=None) -> MapEstimate:
-    """Estimate a ``k × k`` functional map and a point map from descriptors (and optional
-    landmarks): ``MapEstimator(k=k, ...)(source, target, landmarks, ...)``, the other fields
-    at their defaults.
-
-    **Arguments:**
-
-    - `source`, `target`, `landmarks`, `source_mesh`, `target_mesh`, `source_symmetry`: as
-      [`MapEstimator`][bsfjax.MapEstimator]'s call.
-    - `k`, `refine_to`, `n_energies`, `zoomout_step`, `starts`, `derived_landmarks`,
-      `turn_check`: the [`MapEstimator`][bsfjax.MapEstimator] fields.
-    - `zoomout_samples`: the field, or the ``(source, target)``
-      [`Subsample`][bsfjax.Subsample] s of the call's ``samples``.
-
-    **Returns:**
-
-    a [`MapEstimate`][bsfjax.MapEstimate].
-    """
-    source_mesh, target_mesh = (None if m is None else as_mesh(m, w) for m, w in
-                                ((source_mesh, "source_mesh"), (target_mesh, "target_mesh")))
-    given = isinstance(zoomout_samples, tuple)
-    estimator = MapEstimator(
-        k=k, refine_to=refine_to, n_energies=n_energies,
-        zoomout_samples=_DEFAULT.zoomout_samples if given else zoomout_samples,
-        zoomout_step=zoomout_step, starts=starts, derived_landmarks=derived_landmarks,
-        turn_check=turn_check)
-    return estimator(source, target, landmarks, source_mesh=source_mesh,
-                     target_mesh=target_mesh, samples=zoomout_samples if given else None,
-                     source_symmetry=source_symmetry)
-
-
-def mirror_symmetry(spectrum: Spectrum, mesh, *, k: int = _DEFAULT.k,
-                    refine_to: int | None = _DEFAULT.refine_to,
-                    n_energies: int = _DEFAULT.n_energies,
-                    samples: int | Subsample | None = _DEFAULT.zoomout_samples,
-                    zoomout_step: int = _DEFAULT.zoomout_step, rows=None) -> np.ndarray:
-    """The shape's intrinsic mirror symmetry ``S: M → M``, a self point map that reverses
-    orientation: [`MapEstimator.mirror_symmetry`][bsfjax.MapEstimator.mirror_symmetry] of
-    ``MapEstimator(k=k, ...)``, the other fields at their defaults.
-
-    **Arguments:**
-
-    - `spectrum`, `mesh`, `rows`: as
-      [`MapEstimator.mirror_symmetry`][bsfjax.MapEstimator.mirror_symmetry].
-    - `k`, `refine_to`, `n_energies`, `zoomout_step`: the
-      [`MapEstimator`][bsfjax.MapEstimator] fields.
-    - `samples`: ZoomOut on this many farthest-point samples (the field
-      ``zoomout_samples``), on a given [`Subsample`][bsfjax.Subsample], or on every vertex
-      (``None``).
-
-    **Returns:**
-
-    ``(n,)`` int array, ``S[i]`` the mirror image of vertex ``i`` (with ``rows``,
-    ``(len(rows),)``: the image of ``rows[i]``).
-    """
-    mesh = as_mesh(mesh, "mesh")  # trimesh, pyFM, open3d, (V, F): bsfjax.as_mesh
-    given = isinstance(samples, Subsample)
-    estimator = MapEstimator(k=k, refine_to=refine_to, n_energies=n_energies,
-                             zoomout_samples=None if given else samples,
-                             zoomout_step=zoomout_step)
-    return estimator.mirror_symmetry(spectrum, mesh, samples=samples if given else None,
-                                     rows=rows)

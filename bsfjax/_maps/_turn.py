@@ -154,14 +154,14 @@ def descriptors(spectrum: Spectrum, n_energies: int, k0: int, variance: float, l
                                        variance=variance)], axis=1)
 
 
-def check_sizes(k, refine_to, km: int) -> int:
-    """``k`` and ``refine_to`` (default ``km``) checked against the ``km`` eigenpairs there
-    are; returns ``refine_to``."""
+def check_sizes(k, refine_to, km: int, name: str = "refine_to") -> int:
+    """``k`` and ``refine_to`` (default ``km``; ``name`` in messages) checked against the
+    ``km`` eigenpairs there are; returns ``refine_to``."""
     if not isinstance(k, (int, np.integer)) or not 1 <= k <= km:
         raise BSFError(f"k must be an integer in [1, {km}] (the spectra's size), got {k!r}")
     refine_to = km if refine_to is None else refine_to
     if not isinstance(refine_to, (int, np.integer)) or not k <= refine_to <= km:
-        raise BSFError(f"refine_to must be an integer in [{k}, {km}], got {refine_to!r}")
+        raise BSFError(f"{name} must be an integer in [{k}, {km}], got {refine_to!r}")
     return refine_to
 
 

@@ -53,11 +53,11 @@ from .._maps import face_geometry
 from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
 from .._maps import (MapEstimator, check_starts, estimate_size, guidable,
-                     landmark_geodesics)
+                     landmark_geodesics, unguided_on_clouds)
 from ._face_labels import decide_face_labels, face_label_shares
-from ._collection_rows import (body_result, collection_estimator, file_row_results,
-                               landmark_lookup, missing_parts, on_body, source_values,
-                               whole_result)
+from ._collection_rows import (SourceSymmetry, body_result, collection_estimator,
+                               file_row_results, landmark_lookup, missing_parts, on_body,
+                               source_values, whole_result)
 from .._metrics import labels_to_indicators
 from .._mesh import (HoleFill, MainBody, Mesh, as_mesh, as_strength, is_mesh_like, load_mesh,
                      prepare_scan, surface_for_map)
@@ -345,13 +345,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     one_start = check_starts(estimator.starts, k_map, (single,),
                              estimator.landmark_free_starts) == (single,)
     pending: dict[tuple, list[_Target]] = {}
-    symmetry = []  # the source's mirror symmetry, for the estimator's turn check: computed once
-
-    def source_symmetry():
-        if not symmetry:
-            symmetry.append(estimator.mirror_symmetry(src_spec.truncate(k_map), src_geometry,
-                                                      samples=sub_m))
-        return symmetry[0]
+    source_symmetry = SourceSymmetry(src_spec, src_geometry, sub_m)  # (once per size)
 
     def prepare(i, mesh: Mesh, t: float) -> _Target:
         """Target ``i``'s host work (``t``: when its reading began)."""
@@ -366,15 +360,16 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             raise BSFError(f"{mesh.name or f'target {i}'}: per-triangle labels need a triangle "
                            "target; a point cloud has none")
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
+        this = unguided_on_clouds(estimator, source, mesh)  # (a point cloud: unguided)
         if lm is None:  # (the orientation term's triangles: a point cloud's stand-in surface)
             mesh = surface_for_map(mesh)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
         est = None
         if lm is None and not one_start:  # the choice among starts: the estimator's own map
-            est = estimator(src_spec.truncate(k_map), spec.truncate(k_map), source_mesh=src_geometry,
-                            target_mesh=mesh, samples=None if sub is None else (sub_m, sub),
-                            source_symmetry=source_symmetry())
+            est = this(src_spec, spec, source_mesh=src_geometry, target_mesh=mesh,
+                       samples=None if sub is None else (sub_m, sub),
+                       source_symmetry=source_symmetry(this))
         guide = None if lm is None or not guidable(source, mesh, estimator) else \
             landmark_geodesics(source, mesh, lm, (src_spec.mass, spec.mass))
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,

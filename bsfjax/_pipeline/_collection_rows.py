@@ -38,6 +38,22 @@ def collection_estimator(estimator, k: int, k_map: int, n_energies, zoomout_samp
     return dataclasses.replace(estimator, k=k, refine_to=k_map)
 
 
+class SourceSymmetry:
+    """The source's mirror symmetry for the estimators' turn check, computed once per size:
+    that of the estimator's own check (``guided_to`` with ``derived_guidance`` and the
+    guidance on, else ``refine_to``; `MapEstimator._mirror_size`)."""
+
+    def __init__(self, spectrum, mesh, samples):
+        self.spectrum, self.mesh, self.samples, self.by_size = spectrum, mesh, samples, {}
+
+    def __call__(self, est: MapEstimator):
+        size = est.guided_to if est.landmark_guidance and est.derived_guidance else est.refine_to
+        if size not in self.by_size:
+            self.by_size[size] = dataclasses.replace(est, refine_to=size).mirror_symmetry(
+                self.spectrum, self.mesh, samples=self.samples)
+        return self.by_size[size]
+
+
 def landmark_lookup(landmarks, source: Mesh,
                     file_rows: bool) -> Callable[[int, Mesh], tuple | None]:
     """``(index, target mesh) →`` the checked landmark pair of target ``index`` (vertex

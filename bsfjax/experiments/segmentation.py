@@ -36,7 +36,7 @@ from tqdm.auto import tqdm
 from .._util import BSFError
 from .._maps import fmap_from_p2p
 from .._pipeline import transfer_labels
-from .._maps import MapEstimator, estimate_map, estimate_size, guidable
+from .._maps import MapEstimator, estimate_map
 from .._mesh import load_labels
 from .._mesh import mesh_edges
 from .._maps import REFINE_EIGENPAIRS
@@ -143,18 +143,18 @@ def _kind(a: str, b: str) -> str:
 def _maps(sm, sn, gt, k: int, landmarks, meshes, names) -> dict:
     """``{map name: (C (k × k), p2p)}`` for the maps of the module doc named in ``names``."""
     mesh_kw = dict(source_mesh=meshes[0], target_mesh=meshes[1])
-    k_lm = estimate_size(k, min(sm.k, sn.k), guidable(*meshes, MapEstimator()))  # (as the CLI)
-    first = lambda n: estimate_map(sm.truncate(k_lm), sn.truncate(k_lm), k=k,  # noqa: E731
+    # as the CLI: ZoomOut to 2k, guided by landmarks (given or read off a map) to every
+    # eigenpair of the spectra (MapEstimator.guided_to)
+    first = lambda n: estimate_map(sm, sn, k=k,  # noqa: E731
                                    landmarks=(landmarks[0][:n], landmarks[1][:n]),
-                                   refine_to=k_lm, **mesh_kw)
+                                   refine_to=2 * k, **mesh_kw)
     make = {
         "default": lambda: first(N_LANDMARKS),
         "1 landmark": lambda: first(1),
         "2 landmarks": lambda: first(2),
         "crude": lambda: estimate_map(sm.truncate(20), sn.truncate(20), k=20,
                                       landmarks=landmarks, refine_to=20),
-        "no landmarks": lambda: estimate_map(sm.truncate(2 * k), sn.truncate(2 * k), k=k,
-                                             refine_to=2 * k, **mesh_kw),
+        "no landmarks": lambda: estimate_map(sm, sn, k=k, refine_to=2 * k, **mesh_kw),
         "no landmarks, one start": lambda: estimate_map(
             sm.truncate(2 * k), sn.truncate(2 * k), k=k, refine_to=2 * k,
             starts=((k, MapEstimator().wks_variance),), **mesh_kw)}
