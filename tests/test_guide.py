@@ -160,13 +160,13 @@ def test_derived_landmarks_guide_a_partial_target_without_landmarks(partial_pair
     """Without landmarks, ``derived_guidance`` also runs the estimates with landmark pairs
     read off a map guided by them; the choice keeps the guided one on the cut target, whose
     arm and leg stay in place (as ``bsfjax transfer --partial``: ZoomOut to 60, guided to
-    100)."""
+    100; phase 3 alone, without the turn check: 89.1 % unguided, 93.5 % guided)."""
     source, target, sm, sn, _, truth, kept = partial_pair
     mass = np.asarray(vertex_areas(target))[:kept.size]
 
     def accuracy(derived_guidance):
-        est = bj.MapEstimator(refine_to=60, derived_guidance=derived_guidance)(
-            sm, sn, source_mesh=source, target_mesh=target)
+        est = bj.MapEstimator(refine_to=60, derived_guidance=derived_guidance,
+                              turn_check=False)(sm, sn, source_mesh=source, target_mesh=target)
         right = truth[np.asarray(est.p2p)[:kept.size]] == truth[kept]
         return float(mass[right].sum() / mass.sum())
 

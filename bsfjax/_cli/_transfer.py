@@ -30,10 +30,11 @@ def _parse_landmarks(text: str | None):
     return src, tgt
 
 
-#: Said after the missing parts of a target matched without landmarks or ``--partial``.
-PARTIAL_HINT = ("the target misses source parts and no landmarks were given: its map may have "
-                "slid a limb into a missing part; give landmarks on what it kept, or rerun "
-                "with --partial")
+#: Said when a target matched without landmarks misses source parts, before its map is
+#: estimated again as with ``--partial``.
+PARTIAL_AGAIN = ("the target misses source parts and no landmarks were given: estimating its "
+                 "map again with the landmarks read off the first one guiding ZoomOut "
+                 "(--partial; landmarks on what it kept are better)")
 
 
 def missing_line(values, result, src_prep, prep, per_face: bool, names=None) -> tuple:
@@ -76,7 +77,6 @@ def _cmd_transfer(args) -> int:
 def _transfer_one(args) -> int:
     import numpy as np
 
-    from .._pipeline import transfer_labels, transfer_values
     from .._mesh import load_mesh, prepare_scan, save_mesh
     from .._spectral import spectrum
 
@@ -145,7 +145,7 @@ def _transfer_one(args) -> int:
         from .._maps import check_fmap_memory
 
         check_fmap_memory(k)
-    C = p2p = None
+    C = p2p = est = None
     k_spec = min(2 * k, kmax) if kind == "estimate" else k
     if kind == "fmap":
         C = _read_array(rest[0], "fmap")
@@ -182,60 +182,29 @@ def _transfer_one(args) -> int:
                           "mirror image or turned front to back (an orientation term and a choice "
                           "among several starts make it less likely; two landmark pairs remove "
                           "it)", stacklevel=1)
-        from .._maps import unguided_on_clouds
-        from .._mesh import surface_for_map
-
-        # without landmarks a point cloud gives the orientation term its stand-in surface
-        shapes = ((source, target) if landmarks is not None else
-                  (surface_for_map(source), surface_for_map(target)))
-        # ZoomOut to k_map; where landmarks (given, or read off a map) guide it on two
-        # triangle meshes, to every eigenpair (MapEstimator.guided_to)
-        estimator = unguided_on_clouds(map_estimator(args, k, k_map), source, target)
-        est = estimator(sm, sn, landmarks, source_mesh=shapes[0], target_mesh=shapes[1])
+        est = _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target,
+                            args.partial)
         C, p2p = est.C, est.p2p
-        print(f"estimated a {k}x{k} map (ZoomOut to {k_map}, to {k_spec} where landmarks guide "
-              "it)", file=sys.stderr)
-        if est.start is not None:
-            second = ("" if est.landmarks is None else
-                      f", then {len(est.landmarks[0])} landmarks read off its map")
-            turn = ", then swapped left and right (it was turned)" if est.swapped else ""
-            print(f"no landmarks: kept start k0 = {est.start[0]}, WKS variance "
-                  f"{est.start[1]:g}{second}{turn}; geodesic distortion {est.distortion:.4f}, "
-                  f"orientation agreement {est.orientation:.1%}", file=sys.stderr)
-            if est.proxy is not None:  # a large mesh: the start was chosen on proxies
-                print(f"large mesh: chosen on proxies of {est.proxy[0]} and {est.proxy[1]} "
-                      "vertices, then carried to the meshes", file=sys.stderr)
-            if est.turn_doubtful:
-                warnings.warn(TURN_DOUBT, stacklevel=1)
-    from .._transfer import method_for_shapes
-
-    # a pair with a point cloud: the refined continuation without the WKS descriptors
-    common = dict(C=C, p2p=p2p, method=method_for_shapes(args.method, source, target),
-                  mesh=source)
+    res = _transfer_through(args, k, kind, C, p2p, est, sm, sn, values, source, target,
+                            per_face)
     on_whole = False  # the result on the whole target (main body and other components)
-    if args.method == "refined":  # its continuation runs on the samples of the map's ZoomOut
-        from .._sampling import subsample
-
-        n_samples = map_estimator(args, k).zoomout_samples
-        common["samples"] = (est.samples if kind == "estimate" else
-                             (subsample(source, n_samples), subsample(target, n_samples)))
-    if args.labels and per_face:
-        from .._pipeline import transfer_face_labels
-
-        del common["mesh"]
-        res = transfer_face_labels(sm, sn, values, source_mesh=source, target_mesh=target,
-                                   threshold=args.threshold, **common)
-    elif args.labels:
-        res = transfer_labels(sm, sn, values, threshold=args.threshold, **common)
     if args.labels:
         result = res.labels.astype(np.int64)
         print(f"transferred {np.unique(values).size} labels "
               f"{'of triangles ' if per_face else ''}with {args.method}; unassigned: "
               f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
         line, n_gone = missing_line(values, result, src_prep, prep, per_face, names)
+        if (n_gone and kind == "estimate" and landmarks is None and not args.partial
+                and not (source.is_point_cloud or target.is_point_cloud)):
+            # a partial target: its first map may have slid a limb into the missing part
+            print(f"{line}\n{PARTIAL_AGAIN}", file=sys.stderr)
+            est = _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, True)
+            C, p2p = est.C, est.p2p
+            res = _transfer_through(args, k, kind, C, p2p, est, sm, sn, values, source, target,
+                                    per_face)
+            result = res.labels.astype(np.int64)
+            line = missing_line(values, result, src_prep, prep, per_face, names)[0]
         print(line, file=sys.stderr)
-        if n_gone and kind == "estimate" and landmarks is None and not args.partial:
-            print(PARTIAL_HINT, file=sys.stderr)
         if res.regime is not None:
             why = [] if res.agreement is None else [f"{res.agreement:.1%} of the area as the "
                                                     "input map's pull-back"]
@@ -258,8 +227,7 @@ def _transfer_one(args) -> int:
                   f"the target area ({np.mean(correct):.1%} of its "
                   f"{'triangles' if per_face else 'vertices'})", file=sys.stderr)
     else:
-        result = transfer_values(sm, sn, values, **common)
-        result = result.T if result.ndim == 2 else result
+        result = res.T if res.ndim == 2 else res
     # every file written has the target file's rows: -1 / NaN where the reader dropped one
     if parts.n_other_components or prep.n_added:
         if not on_whole:  # (already there for the accuracy)
@@ -280,3 +248,62 @@ def _transfer_one(args) -> int:
     print(f"wrote {args.out}" + (f" and {args.mesh_out}" if args.mesh_out else "")
           + dropped_note(target, per_face), file=sys.stderr)
     return 0
+
+
+def _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, partial: bool):
+    """The command's [`MapEstimator`][bsfjax.MapEstimator] run (``partial``:
+    ``derived_guidance``), what it did said on stderr."""
+    import dataclasses
+
+    from .._maps import unguided_on_clouds
+    from .._mesh import surface_for_map
+
+    # without landmarks a point cloud gives the orientation term its stand-in surface
+    shapes = ((source, target) if landmarks is not None else
+              (surface_for_map(source), surface_for_map(target)))
+    # ZoomOut to k_map; where landmarks (given, or read off a map with --partial) guide it on
+    # two triangle meshes, to every eigenpair (MapEstimator.guided_to)
+    estimator = dataclasses.replace(map_estimator(args, k, k_map), derived_guidance=partial)
+    est = unguided_on_clouds(estimator, source, target)(
+        sm, sn, landmarks, source_mesh=shapes[0], target_mesh=shapes[1])
+    print(f"estimated a {k}x{k} map (ZoomOut to {k_map}, to {k_spec} where landmarks guide "
+          "it)", file=sys.stderr)
+    if est.start is not None:
+        second = ("" if est.landmarks is None else
+                  f", then {len(est.landmarks[0])} landmarks read off its map")
+        turn = ", then swapped left and right (it was turned)" if est.swapped else ""
+        print(f"no landmarks: kept start k0 = {est.start[0]}, WKS variance "
+              f"{est.start[1]:g}{second}{turn}; geodesic distortion {est.distortion:.4f}, "
+              f"orientation agreement {est.orientation:.1%}", file=sys.stderr)
+        if est.proxy is not None:  # a large mesh: the start was chosen on proxies
+            print(f"large mesh: chosen on proxies of {est.proxy[0]} and {est.proxy[1]} "
+                  "vertices, then carried to the meshes", file=sys.stderr)
+        if est.turn_doubtful:
+            warnings.warn(TURN_DOUBT, stacklevel=1)
+    return est
+
+
+def _transfer_through(args, k, kind, C, p2p, est, sm, sn, values, source, target, per_face):
+    """The values' transfer through the map: a label transfer's result, or a function's
+    values on the target."""
+    from .._pipeline import transfer_labels, transfer_values
+    from .._transfer import method_for_shapes
+
+    # a pair with a point cloud: the refined continuation without the WKS descriptors
+    common = dict(C=C, p2p=p2p, method=method_for_shapes(args.method, source, target),
+                  mesh=source)
+    if args.method == "refined":  # its continuation runs on the samples of the map's ZoomOut
+        from .._sampling import subsample
+
+        n_samples = map_estimator(args, k).zoomout_samples
+        common["samples"] = (est.samples if kind == "estimate" else
+                             (subsample(source, n_samples), subsample(target, n_samples)))
+    if args.labels and per_face:
+        from .._pipeline import transfer_face_labels
+
+        del common["mesh"]
+        return transfer_face_labels(sm, sn, values, source_mesh=source, target_mesh=target,
+                                    threshold=args.threshold, **common)
+    if args.labels:
+        return transfer_labels(sm, sn, values, threshold=args.threshold, **common)
+    return transfer_values(sm, sn, values, **common)
