@@ -22,7 +22,7 @@ from ._fmap import (
     nearest_neighbors, zoomout,
 )
 from ._guide import (DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_size, guidable, guided_zoomout,
-                     landmark_geodesics, unguided_on_clouds)
+                     landmark_geodesics, turn_mirror_size, unguided_on_clouds)
 from ._orientation import OrientationBasis, face_geometry, orientation_bases
 from ._refine import (
     REFINE_EIGENPAIRS, check_options, refine_core, refine_point_maps, refinement_sizes,
@@ -38,6 +38,6 @@ __all__ = [
     "icp_refine", "map_distortion", "map_stage", "mirror_symmetry", "nearest_neighbors",
     "orientation_agreement", "orientation_bases", "point_map_stage", "problem_stage",
     "refine_core", "refine_point_maps", "refinement_sizes", "sizes_for", "source_ops_stage",
-    "unguided_on_clouds",
+    "turn_mirror_size", "unguided_on_clouds",
     "spectra", "start_point_map", "wks", "wks_energies", "zoomout",
 ]

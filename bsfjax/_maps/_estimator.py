@@ -19,7 +19,7 @@ from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pa
     check_starts, check_symmetry, to_given
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
-from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable
+from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable, turn_mirror_size
 from ._proxy import needs_proxy, proxy_estimate
 from ._turn import check_sizes, descriptors, landmarks_from_map, selection_rows, self_map, \
     turn_choice, turn_landmark_sets
@@ -61,7 +61,8 @@ class MapEstimator(eqx.Module):
     3. **Derived landmarks**: ``derived_landmarks`` landmark pairs read off the kept map (the
        source's farthest points, each with the target vertex whose image lies nearest), and
        phase 1 again with them at ``(k, wks_variance)``, as if they were given (with
-       ``derived_guidance`` also with ZoomOut guided by them); the second map is kept if [`bsfjax.choose_map`][bsfjax.choose_map] prefers it.  On the 9 FAUST / FAUST_5k
+       ``derived_guidance`` also with ZoomOut guided by them); the second map is kept if
+       [`bsfjax.choose_map`][bsfjax.choose_map] prefers it.  On the 9 FAUST / FAUST_5k
        pairs of docs/results/segmentation.md ("Without landmarks") this is as accurate as 5 true
        landmarks.
     4. **The turn check** (``turn_check``): two human shapes can also be matched turned front
@@ -333,12 +334,6 @@ class MapEstimator(eqx.Module):
 
     # ----------------------------------------------------------------------- the phases
 
-    def _mirror_size(self, pb: Problem) -> int:
-        """The size of the turn check's mirror symmetry: that of the derived estimates (on
-        the FAUST targets without a forearm and a foot, with ``derived_guidance``, 92.3 %
-        at 100 against 87.8 % at 60 on 001→011)."""
-        return pb.guided_to if self.derived_guidance else pb.refine_to
-
     def _single_start(self) -> tuple:
         return (self.k, self.wks_variance)
 
@@ -427,7 +422,8 @@ class MapEstimator(eqx.Module):
         if source_symmetry is not None:
             sx = source_symmetry[x]
         else:  # the mirror images of x only (a search of len(x) rows, not of every vertex)
-            at_size = dataclasses.replace(self, refine_to=self._mirror_size(pb))
+            at_size = dataclasses.replace(
+                self, refine_to=turn_mirror_size(self, pb.refine_to, pb.guided_to))
             sx = at_size.mirror_symmetry(
                 source_given, pb.source_mesh,
                 samples=None if pb.samples is None else pb.samples[0], rows=x)

@@ -55,7 +55,8 @@ from ._distortion import SCALE_RANGE, _capped
 from ._fmap import _from_p2p, _nearest
 
 __all__ = ["DERIVED_GUIDANCE", "GUIDE_WEIGHT", "estimate_size", "guidable", "estimate_zoomout",
-           "guided_zoomout", "landmark_geodesics", "unguided_on_clouds"]
+           "guided_zoomout", "landmark_geodesics", "turn_mirror_size",
+           "unguided_on_clouds"]
 
 #: The quantile of the distances to a landmark whose ratio between the shapes estimates ``σ``.
 SCALE_QUANTILE = 0.3
@@ -88,6 +89,14 @@ def unguided_on_clouds(estimator, *shapes):
     if any(getattr(m, "is_point_cloud", False) for m in shapes):
         return dataclasses.replace(estimator, landmark_guidance=0.0)
     return estimator
+
+
+def turn_mirror_size(estimator, refine_to, guided_to):
+    """The size of the turn check's mirror symmetry: ``guided_to`` where the landmarks read
+    off a map guide (``derived_guidance`` with ``landmark_guidance`` on), else ``refine_to``.
+    Measured with the derived pairs guiding at the full weight, on FAUST 001→011 without a
+    forearm and a foot: 92.3 % at 100 against 87.8 % at 60."""
+    return guided_to if estimator.derived_guidance and estimator.landmark_guidance else refine_to
 
 
 def guidable(source_mesh, target_mesh, estimator) -> bool:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .._maps import MapEstimator, check_landmark_pairs
+from .._maps import MapEstimator, check_landmark_pairs, turn_mirror_size
 from .._mesh import MainBody, Mesh, vertex_areas
 from .._metrics import missing_labels
 from .._util import BSFError
@@ -40,14 +40,13 @@ def collection_estimator(estimator, k: int, k_map: int, n_energies, zoomout_samp
 
 class SourceSymmetry:
     """The source's mirror symmetry for the estimators' turn check, computed once per size:
-    that of the estimator's own check (``guided_to`` with ``derived_guidance`` and the
-    guidance on, else ``refine_to``; `MapEstimator._mirror_size`)."""
+    that of the estimator's own check (`bsfjax._maps._guide.turn_mirror_size`)."""
 
     def __init__(self, spectrum, mesh, samples):
         self.spectrum, self.mesh, self.samples, self.by_size = spectrum, mesh, samples, {}
 
     def __call__(self, est: MapEstimator):
-        size = est.guided_to if est.landmark_guidance and est.derived_guidance else est.refine_to
+        size = turn_mirror_size(est, est.refine_to, est.guided_to)
         if size not in self.by_size:
             self.by_size[size] = dataclasses.replace(est, refine_to=size).mirror_symmetry(
                 self.spectrum, self.mesh, samples=self.samples)
