@@ -361,3 +361,39 @@ def test_host_work_overlaps_the_stages_on_one_blas_thread(monkeypatch):
     for i in range(3):
         np.testing.assert_array_equal(overlapped[i].p2p, waited[i].p2p)
         np.testing.assert_array_equal(overlapped[i].labels, waited[i].labels)
+
+
+def test_a_target_missing_parts_is_estimated_again(collection, monkeypatch):
+    """Without landmarks, a target whose labels miss source parts has its map estimated again
+    with ``derived_guidance`` (as ``bsfjax transfer``), and that result is the one yielded:
+    equal to the collection run with such an estimator from the start; a target with
+    landmarks, or ``estimate_again=False``, is estimated once."""
+    import bsfjax._pipeline._collection as col
+    small, targets, lm, _ = collection
+    used = []
+    real = col.unguided_on_clouds
+
+    def spy(est, *meshes):
+        used.append(est.derived_guidance)
+        return real(est, *meshes)
+
+    real_missing = col.missing_parts
+    monkeypatch.setattr(col, "unguided_on_clouds", spy)
+    monkeypatch.setattr(col, "missing_parts",  # (every target misses a part)
+                        lambda *a: tuple(real_missing(*a)) or (int(small.labels[0]),))
+    kw = dict(method="refined", k=10, zoomout_samples=300, landmarks=lambda i: lm.get(i))
+    got = dict(transfer_collection(small.source, small.labels, targets, **kw))
+    assert used == [False, False, True]  # (target 1 has landmarks: once)
+    assert got[0].estimated_again and not got[1].estimated_again
+    used.clear()
+    partial = bsfjax.MapEstimator(zoomout_samples=300, derived_guidance=True)
+    direct = dict(transfer_collection(small.source, small.labels, targets[:1], method="refined",
+                                      k=10, estimator=partial))[0]
+    assert used == [True] and not direct.estimated_again
+    np.testing.assert_array_equal(got[0].p2p, direct.p2p)
+    np.testing.assert_array_equal(got[0].labels, direct.labels)
+    assert got[0].seconds > direct.seconds * 0.5  # (both estimates counted)
+    used.clear()
+    once = dict(transfer_collection(small.source, small.labels, targets[:1], **kw,
+                                    estimate_again=False))[0]
+    assert used == [False] and not once.estimated_again and once.missing

@@ -228,6 +228,7 @@ def test_collection_of_partial_targets_reports_and_keeps_the_file_rows(partial_f
     summary = json.loads((out / "summary.json").read_text())["targets"][0]
     assert summary["missing_parts"] == ["left_arm"]
     assert summary["filled_vertices"] > 0
+    assert summary["estimated_again"] is False  # (landmarks given: one estimate)
     labels, names = bsfjax.load_labels(out / "partial.json")
     assert labels.shape == (target.n_vertices,)  # one row per file row
     ours = np.asarray([pair.label_names.index(n) for n in names])[labels]

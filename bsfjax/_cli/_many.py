@@ -311,6 +311,11 @@ def cmd_transfer_many(args, error) -> int:
     return 1 if failed else 0
 
 
+#: Said of a target whose first map's labels missed source parts (no landmarks, no --partial).
+ESTIMATED_AGAIN = ("the first map's labels missed source parts: its map was estimated again "
+                   "with the landmarks read off it guiding ZoomOut (as --partial)")
+
+
 def _write_target(args, run: _Run, i: int, res, part_names, per_face: bool, error) -> dict:
     """Score target ``i`` against its truth and write its outputs, then its manifest;
     returns its summary row.  Raises for this target alone (a truth of the wrong length, an
@@ -345,7 +350,9 @@ def _write_target(args, run: _Run, i: int, res, part_names, per_face: bool, erro
                    confidence=res.confidence, agreement=res.agreement,
                    missing_parts=[part_names[j] if part_names is not None
                                   and 0 <= j < len(part_names) else j for j in res.missing],
-                   filled_vertices=res.filled_vertices)
+                   filled_vertices=res.filled_vertices, estimated_again=res.estimated_again)
+        if res.estimated_again:
+            tqdm.write(f"bsfjax transfer: {path}: {ESTIMATED_AGAIN}", file=sys.stderr)
         if res.missing:
             from ._io import part_list
 

@@ -38,6 +38,7 @@ BLAS calls run on one thread (`bsfjax._util._threads`), as does the eigensolve o
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Iterable, Iterator, Sequence
 from typing import NamedTuple
@@ -55,7 +56,7 @@ from ._mesh_level import _decide_labels, _split_label_kwargs
 from .._maps import (MapEstimator, check_starts, estimate_size, guidable,
                      landmark_geodesics, unguided_on_clouds)
 from ._face_labels import decide_face_labels, face_label_shares
-from ._collection_rows import (SourceSymmetry, body_result, collection_estimator,
+from ._collection_rows import (SourceSymmetry, TargetTransfer, body_result, collection_estimator,
                                file_row_results, landmark_lookup, missing_parts, on_body,
                                source_values, whole_result)
 from .._metrics import labels_to_indicators
@@ -79,42 +80,6 @@ _SCAN_LIMIT = 64
 _KEEP_BYTES = 256 * 2 ** 20
 
 
-class TargetTransfer(NamedTuple):
-    """The result for one target of [`transfer_collection`][bsfjax.transfer_collection]."""
-
-    labels: np.ndarray | None  #: ``(n_N,)`` int labels (−1 unassigned), or ``None`` for values
-    values: np.ndarray  #: ``(m, n_N)`` transferred functions (for labels: the label scores)
-    p2p: np.ndarray  #: ``(n_N,)`` the estimated point map (target vertex → source vertex)
-    C: np.ndarray  #: ``(k, k)`` the estimated functional map
-    map_energy: float  #: the estimation energy E(C) of [`bsfjax.estimate_fmap`][bsfjax.estimate_fmap] at ``C``
-    unassigned_share: float  #: area share of the target left unassigned (labels)
-    agreement: float | None  #: area share equal to the pull-back through ``p2p`` (labels)
-    #: area-weighted mean winning score (labels; ``None`` for labels of triangles)
-    confidence: float | None
-    regime: str | None  #: ``"refined"`` only: see [`bsfjax.REGIMES`][bsfjax.REGIMES]
-    n_vertices: int
-    mass: np.ndarray  #: ``(n_N,)`` vertex areas of the target (relative: for area shares)
-    #: this target's host work (reading, eigensolve) plus its share of the time its group's
-    #: stages were dispatched and awaited (they run while the next target's eigensolve does)
-    seconds: float
-    #: without landmarks, from several starts: ``MapEstimate.turn_doubtful`` of its map (the
-    #: map may be turned front to back); ``None`` otherwise
-    turn_doubtful: bool | None = None
-    #: the target [`Mesh`][bsfjax.Mesh] as read: ``mesh.to_file_rows(labels)`` numbers a result
-    #: by the rows of its file (what ``file_rows=True`` returns)
-    mesh: Mesh | None = None
-    #: the target's split ([`bsfjax.split_main_body`][bsfjax.split_main_body]): its main body
-    #: was matched, its other components labelled from the nearest surface
-    main_body: MainBody | None = None
-    #: the Taubin iterations of [`bsfjax.denoise`][bsfjax.denoise] on this target (0: none)
-    denoise_iterations: int = 0
-    #: labels: the source labels with no counterpart on this target (a partial target; see
-    #: [`bsfjax.missing_labels`][bsfjax.missing_labels]), in increasing order
-    missing: tuple = ()
-    #: the vertices its hole patches added for the spectrum (dropped from every result)
-    filled_vertices: int = 0
-
-
 # --------------------------------------------------------------------------- host side
 
 
@@ -132,6 +97,7 @@ class _Target(NamedTuple):
     denoised: int = 0  # the Taubin iterations run on the main body
     fill: HoleFill | None = None  # the holes closed for its spectrum (`mesh` has them)
     guide: tuple | None = None  # with landmarks: ZoomOut's guidance (landmark_geodesics)
+    again: bool | None = None  # the estimator may run again on it (False), it did (True)
 
 
 def _as_mesh(target) -> Mesh:
@@ -206,7 +172,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                         errors: str = "raise", batch: int = 1, starts=None,
                         faces: bool = False, file_rows: bool = False,
                         estimator: MapEstimator | None = None,
-                        denoise: bool | int | str = True) -> Iterator[tuple[int, TargetTransfer | Exception]]:
+                        denoise: bool | int | str = True,
+                        estimate_again: bool = True) -> Iterator[tuple[int, TargetTransfer | Exception]]:
     """Transfer one segmentation (or functions) from ``source`` to every mesh of ``targets``.
 
     Yields ``(index, result)`` as batches finish (grouped by size bucket, so not in order);
@@ -257,6 +224,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
       from each mesh (none on a clean mesh); the labels are on the original vertices, and
       each result's ``denoise_iterations`` and ``mesh`` (as read) say what was done.
       ``False``: the meshes as given; an integer: that many Taubin iterations on every mesh.
+    - `estimate_again`: labels, targets without landmarks (several starts, two triangle
+      meshes): a target whose labels miss source parts (``missing``: a partial target,
+      whose first map may have slid a limb into the missing part) has its map estimated
+      again with the estimator's ``derived_guidance`` on, as ``bsfjax transfer`` does, and
+      yields that result (``estimated_again``; ``True``, default).  ``False``: one estimate
+      each (an estimator with ``derived_guidance`` runs it on every target from the start).
     - `pad`: pad vertex and face counts to `size_bucket` sizes, merged for a
       collection of at most 64 targets (module doc; ``False``: one compilation per distinct
       count).
@@ -347,8 +320,9 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     pending: dict[tuple, list[_Target]] = {}
     source_symmetry = SourceSymmetry(src_spec, src_geometry, sub_m)  # (once per size)
 
-    def prepare(i, mesh: Mesh, t: float) -> _Target:
-        """Target ``i``'s host work (``t``: when its reading began)."""
+    def prepare(i, mesh: Mesh, t: float, estimator: MapEstimator, again: bool) -> _Target:
+        """Target ``i``'s host work (``t``: when its reading began; ``again``: its second
+        estimate)."""
         lm, prep = lm_of(i, mesh), prepare_scan(mesh, strength)  # matched: the main body alone
         parts, mesh, n_it = prep.parts, prep.mesh, prep.denoise_iterations
         lm = None if lm is None else (src_parts.index(lm[0], "source landmarks"),
@@ -372,10 +346,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                        source_symmetry=source_symmetry(this))
         guide = None if lm is None or not guidable(source, mesh, estimator) else \
             landmark_geodesics(source, mesh, lm, (src_spec.mass, spec.mass))
+        # (a point cloud is never guided: unguided_on_clouds)
+        may = est is not None and this is estimator and not estimator.derived_guidance
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
                        None if est is None else est.turn_doubtful, parts, n_it, prep.fill,
-                       guide)
+                       guide, True if again else (False if may else None))
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -412,7 +388,9 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                             batch)
         return group, out, time.perf_counter() - t
 
-    def finish(launched):
+    def finish(launched, retry: dict | None):
+        """The results of a launched group; a target to estimate again goes to ``retry``
+        (its index → its seconds so far) instead."""
         group, out, seconds = launched
         t = time.perf_counter()
         per_target = []
@@ -446,7 +424,11 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             res = body_result(res, tg.fill, src_prep, faces)  # (hole patches dropped)
             res = whole_result(res, tg.parts, src_parts, faces)  # (other components: nearest)
             if labels:
-                res = res._replace(missing=missing_parts(res, body_vals, src_prep.body, faces))
+                res = res._replace(missing=missing_parts(res, body_vals, src_prep.body, faces),
+                                   estimated_again=bool(tg.again))
+                if res.missing and tg.again is False and retry is not None:
+                    retry[tg.index] = res.seconds  # (a partial target: its map again)
+                    continue
             yield tg.index, file_row_results(res, src_parts.whole, faces) if file_rows else res
 
     targets = list(targets)
@@ -454,41 +436,51 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     batch = capped_batch(batch, k, len(share))  # no padding beyond this process's targets
     read: dict[int, Mesh] = {}  # targets of this process the scan has read, handed to prepare
     merged = _merged_sizes(targets, lm_of, read, share) if pad else {}
-    # the group in flight is collected after the next target's host work (module doc)
-    in_flight = None
     cpu = jax.default_backend() == "cpu"
-    for i in share:
-        t = time.perf_counter()
-        try:
-            mesh = read.pop(i) if i in read else _as_mesh(targets[i])
-        except (BSFError, ValueError, OSError) as exc:
-            mesh = exc  # (reported below)
-        if in_flight is not None and cpu and isinstance(mesh, Mesh) \
-                and not eigensolve_on_one_thread(mesh.n_vertices):  # multithreaded: wait
-            yield from finish(in_flight)
-            in_flight = None
-        try:
-            if isinstance(mesh, Exception):
-                raise mesh
-            with one_blas_thread(cpu and in_flight is not None):
-                tg = prepare(i, mesh, t)
-        except (BSFError, ValueError, OSError) as exc:
-            if errors == "raise":
-                raise
-            yield i, exc
-            continue
-        key = (_bucket_key(tg, pad, tg.landmarks is None, zoomout_samples, merged),
-               tg.guide is not None)  # (guided: ZoomOut to k_spec, estimate_size)
-        pending.setdefault(key, []).append(tg)
-        if len(pending[key]) == len(devices) * batch:  # `batch` targets per device
+
+    def run(indices, estimator: MapEstimator, retry: dict | None, before: dict):
+        """The targets ``indices`` through the stages (``before``: seconds each spent
+        already); the group in flight is collected after the next target's host work
+        (module doc)."""
+        in_flight = None
+        for i in indices:
+            t = time.perf_counter() - before.get(i, 0.0)
+            try:
+                mesh = read.pop(i) if i in read else _as_mesh(targets[i])
+            except (BSFError, ValueError, OSError) as exc:
+                mesh = exc  # (reported below)
+            if in_flight is not None and cpu and isinstance(mesh, Mesh) \
+                    and not eigensolve_on_one_thread(mesh.n_vertices):  # multithreaded: wait
+                yield from finish(in_flight, retry)
+                in_flight = None
+            try:
+                if isinstance(mesh, Exception):
+                    raise mesh
+                with one_blas_thread(cpu and in_flight is not None):
+                    tg = prepare(i, mesh, t, estimator, i in before)
+            except (BSFError, ValueError, OSError) as exc:
+                if errors == "raise":
+                    raise
+                yield i, exc
+                continue
+            key = (_bucket_key(tg, pad, tg.landmarks is None, zoomout_samples, merged),
+                   tg.guide is not None)  # (guided: ZoomOut to k_spec, estimate_size)
+            pending.setdefault(key, []).append(tg)
+            if len(pending[key]) == len(devices) * batch:  # `batch` targets per device
+                launched = launch(key, pending.pop(key))
+                if in_flight is not None:
+                    yield from finish(in_flight, retry)
+                in_flight = launched
+        for key in list(pending):
             launched = launch(key, pending.pop(key))
             if in_flight is not None:
-                yield from finish(in_flight)
+                yield from finish(in_flight, retry)
             in_flight = launched
-    for key in list(pending):
-        launched = launch(key, pending.pop(key))
         if in_flight is not None:
-            yield from finish(in_flight)
-        in_flight = launched
-    if in_flight is not None:
-        yield from finish(in_flight)
+            yield from finish(in_flight, retry)
+
+    retry: dict[int, float] = {}
+    yield from run(share, estimator, retry if estimate_again and labels else None, {})
+    if retry:  # partial targets: their maps again, guided by landmarks read off the first
+        yield from run(list(retry), dataclasses.replace(estimator, derived_guidance=True),
+                       None, retry)

@@ -1,4 +1,4 @@
-"""The arguments and results of [`bsfjax.transfer_collection`][bsfjax.transfer_collection] around its stages: its estimator, its landmarks, and the rows of the files.
+"""The arguments and results of [`bsfjax.transfer_collection`][bsfjax.transfer_collection] around its stages: its estimator, its landmarks, its result per target, and the rows of the files.
 
 With ``file_rows=True`` the collection reads the source's values and the landmarks as rows of
 the mesh files and numbers every result by the rows of its target's file
@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
@@ -19,6 +20,46 @@ from .._metrics import missing_labels
 from .._util import BSFError
 
 _DEFAULT = MapEstimator()
+
+
+class TargetTransfer(NamedTuple):
+    """The result for one target of [`transfer_collection`][bsfjax.transfer_collection]."""
+
+    labels: np.ndarray | None  #: ``(n_N,)`` int labels (−1 unassigned), or ``None`` for values
+    values: np.ndarray  #: ``(m, n_N)`` transferred functions (for labels: the label scores)
+    p2p: np.ndarray  #: ``(n_N,)`` the estimated point map (target vertex → source vertex)
+    C: np.ndarray  #: ``(k, k)`` the estimated functional map
+    map_energy: float  #: the estimation energy E(C) of [`bsfjax.estimate_fmap`][bsfjax.estimate_fmap] at ``C``
+    unassigned_share: float  #: area share of the target left unassigned (labels)
+    agreement: float | None  #: area share equal to the pull-back through ``p2p`` (labels)
+    #: area-weighted mean winning score (labels; ``None`` for labels of triangles)
+    confidence: float | None
+    regime: str | None  #: ``"refined"`` only: see [`bsfjax.REGIMES`][bsfjax.REGIMES]
+    n_vertices: int
+    mass: np.ndarray  #: ``(n_N,)`` vertex areas of the target (relative: for area shares)
+    #: this target's host work (reading, eigensolve) plus its share of the time its group's
+    #: stages were dispatched and awaited (they run while the next target's eigensolve does)
+    seconds: float
+    #: without landmarks, from several starts: ``MapEstimate.turn_doubtful`` of its map (the
+    #: map may be turned front to back); ``None`` otherwise
+    turn_doubtful: bool | None = None
+    #: the target [`Mesh`][bsfjax.Mesh] as read: ``mesh.to_file_rows(labels)`` numbers a result
+    #: by the rows of its file (what ``file_rows=True`` returns)
+    mesh: Mesh | None = None
+    #: the target's split ([`bsfjax.split_main_body`][bsfjax.split_main_body]): its main body
+    #: was matched, its other components labelled from the nearest surface
+    main_body: MainBody | None = None
+    #: the Taubin iterations of [`bsfjax.denoise`][bsfjax.denoise] on this target (0: none)
+    denoise_iterations: int = 0
+    #: labels: the source labels with no counterpart on this target (a partial target; see
+    #: [`bsfjax.missing_labels`][bsfjax.missing_labels]), in increasing order
+    missing: tuple = ()
+    #: the vertices its hole patches added for the spectrum (dropped from every result)
+    filled_vertices: int = 0
+    #: labels without landmarks: the first map's labels missed source parts (``missing``
+    #: non-empty), so this map was estimated again with ``derived_guidance`` (a partial
+    #: target; ``transfer_collection``'s ``estimate_again``); ``missing`` is then the second's
+    estimated_again: bool = False
 
 
 def collection_estimator(estimator, k: int, k_map: int, n_energies, zoomout_samples,
