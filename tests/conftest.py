@@ -31,7 +31,8 @@ def pytest_configure(config):
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():
     """Free the compiled programs (``jax.clear_caches``) after a test file that leaves this
-    worker process above half its limit of memory maps.  XLA's CPU JIT maps each compiled
+    worker process above three quarters of its limit of memory maps (a file adds a few
+    thousand at most).  XLA's CPU JIT maps each compiled
     program's code into about 7 memory regions, freed only with the program; a worker that
     kept the several thousand programs of its files reached Linux's limit of 65,530 regions
     per process (``vm.max_map_count``), and the next compilation died in LLVM ("Unable to
@@ -47,7 +48,7 @@ def _release_compiled_programs():
             limit = int(fh.read())
     except (OSError, ValueError):  # not Linux: no such limit to keep below
         return
-    if n_maps > limit // 2:
+    if n_maps > 3 * limit // 4:
         import jax
 
         jax.clear_caches()
