@@ -38,8 +38,8 @@ def _release_compiled_programs():
     per process (``vm.max_map_count``), and the next compilation died in LLVM ("Unable to
     allocate section memory": SIGABRT or SIGSEGV inside ``backend_compile_and_load``, late in
     about a third of the CI runs; a core dump of one held 65,533 maps).  Clearing after every
-    file instead made the suite 1.5x slower (1018 s against 691 s on 2 cores: the programs
-    that files share compiled again)."""
+    file instead cost time (the suite in 1018 s against 913–964 s on the same 2-core machine:
+    the programs that files share compiled again)."""
     yield
     try:
         with open("/proc/self/maps") as fh:
