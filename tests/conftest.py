@@ -32,10 +32,10 @@ def pytest_configure(config):
 def _release_compiled_programs():
     """Free the compiled programs (``jax.clear_caches``) after a test file that leaves this
     worker process above three quarters of its limit of memory maps (a file adds a few
-    thousand at most).  XLA's CPU JIT maps each compiled
-    program's code into about 7 memory regions, freed only with the program; a worker that
-    kept the several thousand programs of its files reached Linux's limit of 65,530 regions
-    per process (``vm.max_map_count``), and the next compilation died in LLVM ("Unable to
+    thousand at most).  XLA's CPU JIT maps each compiled program's code into about 7 memory
+    regions, freed only with the program; a worker that kept the several thousand programs
+    of its files reached Linux's limit of 65,530 regions per process
+    (``vm.max_map_count``), and the next compilation died in LLVM ("Unable to
     allocate section memory": SIGABRT or SIGSEGV inside ``backend_compile_and_load``, late in
     about a third of the CI runs; a core dump of one held 65,533 maps).  Clearing after every
     file instead cost time (the suite in 1018 s against 913–964 s on the same 2-core machine:
