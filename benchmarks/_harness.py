@@ -539,3 +539,44 @@ def run_pyfm(source, target, truth, mass, landmarks=None, target_truth=None) -> 
         model.zoomout_refine(nit=15, step=1, subsample=2000, verbose=False)
     return accuracy(truth[model.get_p2p()], truth if target_truth is None else target_truth,
                     mass)
+
+
+# --- ceilings (bench_scans_partial_ceiling.py, bench_cloud_ceiling.py) ------------------------
+
+
+def ceiling_table(rows, clean: str) -> str:
+    """Markdown of a ceiling benchmark's rows (``pair``, ``target`` and one accuracy per way):
+    each value with its Δ in points from the first way's value on the pair's ``clean``
+    target; a way a row did not run is an empty cell."""
+    names = list(dict.fromkeys(c for r in rows for c in r if c not in ("pair", "target")))
+    lines = ["| pair | target | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
+    ref = {r["pair"]: r[names[0]] for r in rows if r["target"] == clean}
+    for r in rows:
+        cells = []
+        for c in names:
+            if c not in r:
+                cells.append("")
+                continue
+            d = ("" if r["target"] == clean or r["pair"] not in ref else
+                 f" ({100 * (r[c] - ref[r['pair']]):+.1f})")
+            cells.append(f"{100 * r[c]:.1f} %{d}")
+        lines.append(f"| {r['pair']} | {r['target']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def ceiling_main(doc: str, run, clean: str, note: str) -> None:
+    """A ceiling benchmark's command line: ``--out`` (Markdown, and its rows as JSON
+    beside it), ``--data``, ``--pairs``; ``run(data, folder, pairs)`` gives the rows."""
+    ap = parser(doc)
+    add_out(ap, help="output Markdown file (a .json of the rows beside it)")
+    add_data(ap)
+    ap.add_argument("--pairs", default="0-10,1-11,2-12",
+                    help="source-target registration numbers (default 0-10,1-11,2-12)")
+    args = ap.parse_args()
+    require_data(Path(args.data) / "faust", Path(args.data) / SMPL_SEGMENTATION)
+    with tempfile.TemporaryDirectory() as tmp:
+        rows = run(Path(args.data), Path(tmp), pair_list(args.pairs))
+    text = ceiling_table(rows, clean) + f"\n{short_machine()}; {note}\n"
+    print(text)
+    write_text(args.out, text)
+    write_json(Path(args.out).with_suffix(".json"), {"rows": rows})

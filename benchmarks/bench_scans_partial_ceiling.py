@@ -27,8 +27,6 @@ right (as in ``bench_scans_holes.py``).
 
 from __future__ import annotations
 
-import tempfile
-
 import _harness as h
 import bench_scans_holes as holes
 
@@ -100,39 +98,10 @@ def run(data, folder, pairs=holes.PAIRS, k: int = 30) -> list[dict]:
     return rows
 
 
-def table(rows) -> str:
-    names = [c for c in rows[0] if c not in ("pair", "target")]
-    lines = ["| pair | target | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
-    clean, default = {}, names[0]  # (the default estimate: the Δ's reference)
-    for r in rows:
-        if r["target"] == "clean":
-            clean[r["pair"]] = r
-        ref = clean.get(r["pair"])
-        cells = []
-        for c in names:
-            d = "" if r["target"] == "clean" or ref is None else \
-                f" ({100 * (r[c] - ref[default]):+.1f})"
-            cells.append(f"{100 * r[c]:.1f} %{d}")
-        lines.append(f"| {r['pair']} | {r['target']} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
-
-
 def main():
-    ap = h.parser(__doc__)
-    h.add_out(ap, help="output Markdown file (a .json of the rows beside it)")
-    h.add_data(ap)
-    ap.add_argument("--pairs", default="0-10,1-11,2-12",
-                    help="source-target registration numbers (default 0-10,1-11,2-12)")
-    args = ap.parse_args()
-    h.require_data(h.Path(args.data) / "faust", h.Path(args.data) / h.SMPL_SEGMENTATION)
-    with tempfile.TemporaryDirectory() as tmp:
-        rows = run(h.Path(args.data), h.Path(tmp), h.pair_list(args.pairs))
-    note = (f"\n{h.short_machine()}; Δ: points from the clean pair's default (estimate, 5 "
-            "landmarks: 5, 4 on the partial target), the issue's bar for partial targets is −3.0.\n")
-    text = table(rows) + note
-    print(text)
-    h.write_text(args.out, text)
-    h.write_json(h.Path(args.out).with_suffix(".json"), {"rows": rows})
+    h.ceiling_main(__doc__, run, "clean",
+                   "Δ: points from the clean pair's default (estimate, 5 landmarks: 5, 4 on the "
+                   "partial target), the issue's bar for partial targets is −3.0.")
 
 
 if __name__ == "__main__":

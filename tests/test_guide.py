@@ -7,7 +7,7 @@ import pytest
 
 import bsfjax as bj
 from bsfjax._maps._fmap import _from_p2p, _size_schedule, _zoomout_jit
-from bsfjax._maps._guide import guided_search, unguided_on_clouds
+from bsfjax._maps._guide import estimates_again, guided_search, unguided_on_clouds
 from bsfjax.internal import estimate_size, guided_zoomout, landmark_geodesics, vertex_areas
 
 from .conftest import data_path
@@ -148,6 +148,26 @@ def test_clouds_run_unguided(sphere_mesh):
     assert unguided_on_clouds(est, sphere_mesh, sphere_mesh) is est
     assert unguided_on_clouds(est, sphere_mesh, cloud).landmark_guidance == 0.0
     assert unguided_on_clouds(est, cloud, sphere_mesh).k == est.k
+
+
+def test_a_second_estimate_only_where_it_can_differ(sphere_mesh):
+    """``estimates_again`` (the rule ``bsfjax transfer`` and `transfer_collection` share): a
+    landmark-free estimate from several starts between triangle meshes, with
+    ``derived_guidance`` off and the guidance on.  A single start never reaches the phases
+    that the derived pairs guide, so ``--one-start`` would pay for the same map twice."""
+    est, m, cloud = bj.MapEstimator(), sphere_mesh, bj.PointCloud(np.asarray(sphere_mesh.vertices))
+    assert estimates_again(est, None, m, m, 60)
+    assert not estimates_again(est, ([0, 1], [0, 1]), m, m, 60)  # landmarks given
+    assert not estimates_again(est.__class__(derived_guidance=True), None, m, m, 60)
+    assert not estimates_again(est.__class__(starts=((30, 7.0),)), None, m, m, 60)
+    assert not estimates_again(est.__class__(landmark_guidance=0.0), None, m, m, 60)
+    assert not estimates_again(est.__class__(derived_landmarks=0, turn_check=False), None, m,
+                               m, 60)
+    assert not estimates_again(est, None, m, cloud, 60)
+    assert not estimates_again(est, None, cloud, m, 60)
+    # the starts that ZoomOut to refine_to keeps: all but one above it
+    assert not estimates_again(est.__class__(starts=((10, 7.0), (50, 7.0))), None, m, m, 20)
+    assert estimates_again(est.__class__(starts=((10, 7.0), (50, 7.0))), None, m, m, 60)
 
 
 def test_guided_to_is_checked(small_pair):

@@ -194,9 +194,11 @@ def _transfer_one(args) -> int:
               f"{'of triangles ' if per_face else ''}with {args.method}; unassigned: "
               f"{res.unassigned_share:.1%} of the target area", file=sys.stderr)
         line, n_gone = missing_line(values, result, src_prep, prep, per_face, names)
-        if (n_gone and kind == "estimate" and landmarks is None and not args.partial
-                and not (source.is_point_cloud or target.is_point_cloud)):
-            # a partial target: its first map may have slid a limb into the missing part
+        from .._maps import estimates_again
+
+        # (a partial target: its first map may have slid a limb into the missing part)
+        if n_gone and kind == "estimate" and estimates_again(
+                map_estimator(args, k, k_map), landmarks, source, target, k_map):
             print(f"{line}\n{PARTIAL_AGAIN}", file=sys.stderr)
             est = _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, True)
             C, p2p = est.C, est.p2p

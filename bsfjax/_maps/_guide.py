@@ -54,8 +54,8 @@ from jax import lax
 from ._distortion import SCALE_RANGE, _capped
 from ._fmap import _from_p2p, _nearest
 
-__all__ = ["DERIVED_GUIDANCE", "GUIDE_WEIGHT", "estimate_size", "guidable", "estimate_zoomout",
-           "guided_zoomout", "landmark_geodesics", "turn_mirror_size",
+__all__ = ["DERIVED_GUIDANCE", "GUIDE_WEIGHT", "estimate_size", "estimates_again", "guidable",
+           "estimate_zoomout", "guided_zoomout", "landmark_geodesics", "turn_mirror_size",
            "unguided_on_clouds"]
 
 #: The quantile of the distances to a landmark whose ratio between the shapes estimates ``σ``.
@@ -107,6 +107,26 @@ def guidable(source_mesh, target_mesh, estimator) -> bool:
     return bool(estimator.landmark_guidance) and all(
         m is not None and not getattr(m, "is_point_cloud", False)
         for m in (source_mesh, target_mesh))
+
+
+def estimates_again(estimator, landmarks, source_mesh, target_mesh, refine_to: int) -> bool:
+    """Whether a target whose labels miss source parts gets its map estimated again with
+    ``derived_guidance`` (``bsfjax transfer``, [`transfer_collection`][bsfjax.transfer_collection]):
+    only where that second estimate can differ from the first, that is without
+    ``landmarks``, from several starts (phases 3 and 4, where the derived pairs guide, run
+    only after a choice among starts; ``refine_to``: the size that keeps a start), with
+    ``derived_guidance`` still off, the guidance on and both shapes triangle meshes
+    (`guidable`; a point cloud's estimate is never guided).  Anything else would pay a
+    second estimate that returns the first map."""
+    from ._estimate import check_starts
+
+    if landmarks is not None or estimator.derived_guidance:
+        return False
+    if not (estimator.derived_landmarks or estimator.turn_check):
+        return False
+    single = (estimator.k, estimator.wks_variance)
+    starts = check_starts(estimator.starts, refine_to, (single,), estimator.landmark_free_starts)
+    return len(starts) > 1 and guidable(source_mesh, target_mesh, estimator)
 
 
 def landmark_geodesics(source_mesh, target_mesh, landmarks, masses,

@@ -53,7 +53,7 @@ from .._util import BSFError
 from .._maps import face_geometry
 from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
-from .._maps import (MapEstimator, check_starts, estimate_size, guidable,
+from .._maps import (MapEstimator, check_starts, estimate_size, estimates_again, guidable,
                      landmark_geodesics, unguided_on_clouds)
 from ._face_labels import decide_face_labels, face_label_shares
 from ._collection_rows import (SourceSymmetry, TargetTransfer, body_result, collection_estimator,
@@ -335,6 +335,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                            "target; a point cloud has none")
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
         this = unguided_on_clouds(estimator, source, mesh)  # (a point cloud: unguided)
+        may = estimates_again(estimator, lm, source, mesh, k_map)  # (before the stand-in)
         if lm is None:  # (the orientation term's triangles: a point cloud's stand-in surface)
             mesh = surface_for_map(mesh)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
@@ -347,7 +348,6 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         guide = None if lm is None or not guidable(source, mesh, estimator) else \
             landmark_geodesics(source, mesh, lm, (src_spec.mass, spec.mass))
         # (a point cloud is never guided: unguided_on_clouds)
-        may = est is not None and this is estimator and not estimator.derived_guidance
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
                        None if est is None else est.turn_doubtful, parts, n_it, prep.fill,
@@ -480,7 +480,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             yield from finish(in_flight, retry)
 
     retry: dict[int, float] = {}
-    yield from run(share, estimator, retry if estimate_again and labels else None, {})
+    yield from run(share, estimator, retry if estimate_again else None, {})
     if retry:  # partial targets: their maps again, guided by landmarks read off the first
         yield from run(list(retry), dataclasses.replace(estimator, derived_guidance=True),
                        None, retry)
