@@ -257,6 +257,40 @@ def test_compilation_cache_keeps_every_program(cli_files, tmp_path):
     assert outs[0].read_text() == outs[1].read_text()
 
 
+def test_a_python_caller_gets_its_cache_threshold_back(tmp_path, monkeypatch):
+    """In-process, the command keeps every program (threshold 0) while it runs, and the
+    caller's own threshold is back afterwards, also after an error."""
+    import contextlib
+
+    import jax
+
+    import bsfjax._util
+
+    monkeypatch.delenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", raising=False)
+    seen = []
+    real = bsfjax._util.output_transaction
+
+    @contextlib.contextmanager
+    def recording():
+        seen.append(jax.config.jax_persistent_cache_min_compile_time_secs)
+        with real():
+            yield
+
+    monkeypatch.setattr(bsfjax._util, "output_transaction", recording)
+    before = jax.config.jax_persistent_cache_min_compile_time_secs
+    try:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 2.5)
+        assert main(["example", "--out", str(tmp_path / "ex"), "--levels", "1"]) == 0
+        assert jax.config.jax_persistent_cache_min_compile_time_secs == 2.5
+        assert main(["transfer", str(tmp_path / "none.off"), str(tmp_path / "none.off"),
+                     "--labels", str(tmp_path / "none.txt"), "--out",
+                     str(tmp_path / "o.txt")]) == 2
+        assert jax.config.jax_persistent_cache_min_compile_time_secs == 2.5
+    finally:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", before)
+    assert seen[0] == 0.0
+
+
 def test_example_command_writes_a_pair_that_transfer_reads(tmp_path, capsys):
     d = tmp_path / "ex"
     assert main(["example", "--out", str(d), "--levels", "2"]) == 0

@@ -6,6 +6,7 @@ partial output file (every output is written atomically, after all the work is d
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import warnings
 
@@ -33,7 +34,8 @@ def main(argv: list[str] | None = None) -> int:
     exit_now(status)  # no interpreter finalization (see _signals)
 
 
-def _use_compilation_cache() -> None:
+@contextlib.contextmanager
+def _use_compilation_cache():
     """Keep compiled programs between runs in JAX's persistent compilation cache, so that a
     second ``bsfjax`` call on meshes of the same sizes skips compilation (most of a short
     call's time: docs/benchmarks.md).  The folder is ``$XDG_CACHE_HOME/bsfjax/jax`` (default
@@ -43,17 +45,26 @@ def _use_compilation_cache() -> None:
     Every program is kept, however fast it compiled: JAX keeps by default only those that took
     a second or more, and most of ours take 0.05–1 s each, so a second ``bsfjax transfer`` of a
     5.5K-vertex target took 6.4 s instead of 4.1 s (one entry kept instead of 50, 0.46 MB in
-    all).  ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` still overrides it."""
+    all).  ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` still overrides it.
+
+    A Python caller of [`main`][bsfjax.cli.main] gets its own threshold back when the command
+    returns.  The folder stays: JAX sets its cache up once per process, at the first
+    compilation that uses it, and a folder changed afterwards would not be read."""
     import os
 
     import jax
 
+    previous = jax.config.jax_persistent_cache_min_compile_time_secs
     if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    if "JAX_COMPILATION_CACHE_DIR" in os.environ:  # JAX reads it itself ('' = off)
-        return
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    jax.config.update("jax_compilation_cache_dir", os.path.join(base, "bsfjax", "jax"))
+    if "JAX_COMPILATION_CACHE_DIR" not in os.environ:  # (set: JAX reads it itself; '' = off)
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"),
+                                                                ".cache")
+        jax.config.update("jax_compilation_cache_dir", os.path.join(base, "bsfjax", "jax"))
+    try:
+        yield
+    finally:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", previous)
 
 
 def _format_warning(message, category, filename, lineno, line=None) -> str:
@@ -82,12 +93,12 @@ def _run(argv: list[str] | None) -> int:
         parser.print_help()
         return 0
     warnings.filterwarnings("ignore", message="JAXopt is no longer maintained")
-    _use_compilation_cache()
     try:
         from .._util import output_transaction
 
         _check_options(args)
-        with output_transaction():  # all outputs of the command are renamed together, or none
+        # all outputs of the command are renamed together, or none
+        with _use_compilation_cache(), output_transaction():
             return int(args.func(args) or 0)
     except (ValueError, OSError) as exc:  # bad input: one line, no traceback
         msg = " ".join(str(exc).split()) or type(exc).__name__

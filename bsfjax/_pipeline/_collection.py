@@ -97,7 +97,8 @@ class _Target(NamedTuple):
     denoised: int = 0  # the Taubin iterations run on the main body
     fill: HoleFill | None = None  # the holes closed for its spectrum (`mesh` has them)
     guide: tuple | None = None  # with landmarks: ZoomOut's guidance (landmark_geodesics)
-    again: bool | None = None  # the estimator may run again on it (False), it did (True)
+    may_again: bool = False  # its map may be estimated again (estimates_again)
+    again: bool = False  # this is that second estimate
 
 
 def _as_mesh(target) -> Mesh:
@@ -351,7 +352,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
                        None if est is None else est.turn_doubtful, parts, n_it, prep.fill,
-                       guide, True if again else (False if may else None))
+                       guide, may, bool(again))  # (a second estimate: may is False)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -425,8 +426,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             res = whole_result(res, tg.parts, src_parts, faces)  # (other components: nearest)
             if labels:
                 res = res._replace(missing=missing_parts(res, body_vals, src_prep.body, faces),
-                                   estimated_again=bool(tg.again))
-                if res.missing and tg.again is False and retry is not None:
+                                   estimated_again=tg.again)
+                if res.missing and tg.may_again and retry is not None:
                     retry[tg.index] = res.seconds  # (a partial target: its map again)
                     continue
             yield tg.index, file_row_results(res, src_parts.whole, faces) if file_rows else res
