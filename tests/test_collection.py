@@ -382,8 +382,13 @@ def test_a_target_missing_parts_is_estimated_again(collection, monkeypatch):
     monkeypatch.setattr(col, "missing_parts",  # (every target misses a part)
                         lambda *a: tuple(real_missing(*a)) or (int(small.labels[0]),))
     kw = dict(method="refined", k=10, zoomout_samples=300, landmarks=lambda i: lm.get(i))
+    chosen = []  # the choices among starts (phase 2): the second estimate resumes the first's
+    real_choose = bsfjax.MapEstimator._choose_start
+    monkeypatch.setattr(bsfjax.MapEstimator, "_choose_start",
+                        lambda self, *a: chosen.append(1) or real_choose(self, *a))
     got = dict(transfer_collection(small.source, small.labels, targets, **kw))
     assert used == [False, False, True]  # (target 1 has landmarks: once)
+    assert len(chosen) == 1
     assert got[0].estimated_again and not got[1].estimated_again
     used.clear()
     partial = bsfjax.MapEstimator(zoomout_samples=300, derived_guidance=True)

@@ -406,3 +406,41 @@ def test_estimate_map_is_the_estimator_with_its_defaults(small_pair):
                      (dict(orient_weight=0.0), "orient_weight must be a positive")):
         with pytest.raises(ValueError, match=msg):
             MapEstimator(**bad)
+
+
+def test_resume_goes_on_from_the_kept_start():
+    """``resume``: an estimator that differs only in ``derived_guidance`` goes on from the
+    first estimate's kept start (phases 1 and 2 not run again) to the map it reaches on its
+    own, bit for bit; an estimate with other options, or from one start, is refused."""
+    import dataclasses
+
+    small = bsfjax.example_pair(levels=1)
+    sm, sn = bsfjax.spectrum(small.source, 100), bsfjax.spectrum(small.target, 100)
+    kw = dict(source_mesh=small.source, target_mesh=small.target)
+    first = MapEstimator(k=10, refine_to=20, zoomout_samples=300)(sm, sn, **kw)
+    guided = MapEstimator(k=10, refine_to=20, zoomout_samples=300, derived_guidance=True)
+    fresh = guided(sm, sn, **kw)
+    assert not np.array_equal(fresh.p2p, first.p2p)  # (the guidance changes this map)
+    calls = []
+    real = MapEstimator._estimate
+    try:
+        MapEstimator._estimate = lambda self, *a, **k: calls.append(1) or real(self, *a, **k)
+        resumed = guided(sm, sn, resume=first, **kw)
+        n_resumed = len(calls)
+        calls.clear()
+        guided(sm, sn, **kw)
+    finally:
+        MapEstimator._estimate = real
+    # (the starts with k0 <= refine_to = 20: phase 1's estimates, not run again)
+    assert n_resumed == len(calls) - sum(k0 <= 20 for k0, _ in guided.landmark_free_starts)
+    np.testing.assert_array_equal(resumed.p2p, fresh.p2p)
+    np.testing.assert_array_equal(resumed.C, fresh.C)
+    # (the distortions: the Dijkstra runs are shared in another order, to the last bit)
+    assert resumed.start == fresh.start
+    assert resumed.distortion == pytest.approx(fresh.distortion, rel=1e-12)
+    with pytest.raises(bsfjax.BSFError, match="other spectra, starts or options"):
+        dataclasses.replace(guided, n_energies=50)(sm, sn, resume=first, **kw)
+    one = MapEstimator(k=10, refine_to=20, starts=((10, 7.0),))(sm, sn, **kw)
+    assert one.choice is None
+    with pytest.raises(bsfjax.BSFError, match="resume must be a MapEstimate made from several"):
+        guided(sm, sn, resume=one, **kw)

@@ -200,7 +200,8 @@ def _transfer_one(args) -> int:
         if n_gone and kind == "estimate" and estimates_again(
                 map_estimator(args, k, k_map), landmarks, source, target, k_map):
             print(f"{line}\n{PARTIAL_AGAIN}", file=sys.stderr)
-            est = _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, True)
+            est = _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, True,
+                                resume=est)  # (from the first estimate's kept start)
             C, p2p = est.C, est.p2p
             res = _transfer_through(args, k, kind, C, p2p, est, sm, sn, values, source, target,
                                     per_face)
@@ -252,9 +253,11 @@ def _transfer_one(args) -> int:
     return 0
 
 
-def _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, partial: bool):
+def _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, partial: bool,
+                  resume=None):
     """The command's [`MapEstimator`][bsfjax.MapEstimator] run (``partial``:
-    ``derived_guidance``), what it did said on stderr."""
+    ``derived_guidance``; ``resume``: a first estimate to go on from), what it did said on
+    stderr."""
     import dataclasses
 
     from .._maps import unguided_on_clouds
@@ -267,7 +270,7 @@ def _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, par
     # two triangle meshes, to every eigenpair (MapEstimator.guided_to)
     estimator = dataclasses.replace(map_estimator(args, k, k_map), derived_guidance=partial)
     est = unguided_on_clouds(estimator, source, target)(
-        sm, sn, landmarks, source_mesh=shapes[0], target_mesh=shapes[1])
+        sm, sn, landmarks, source_mesh=shapes[0], target_mesh=shapes[1], resume=resume)
     print(f"estimated a {k}x{k} map (ZoomOut to {k_map}, to {k_spec} where landmarks guide "
           "it)", file=sys.stderr)
     if est.start is not None:

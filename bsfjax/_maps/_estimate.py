@@ -53,6 +53,9 @@ class MapEstimate(NamedTuple):
     #: counts ``(source, target)`` of the proxies the choice among starts ran on (a mesh
     #: below the threshold is its own proxy); ``None`` otherwise
     proxy: tuple | None = None
+    #: with several starts (not through proxies): the run the choice among starts kept (phase
+    #: 2), from which ``MapEstimator(...)(..., resume=this)`` goes on; internal
+    choice: tuple | None = None
 
 
 class Run(NamedTuple):
@@ -159,3 +162,29 @@ def check_starts(starts, refine_to: int, single: tuple, default) -> tuple:
             raise BSFError(f"no start has k0 <= refine_to = {refine_to}: {starts!r}")
         kept = single
     return kept
+
+
+def choice_key(estimator, starts: tuple, refine_to: int, source: Spectrum,
+               target: Spectrum) -> tuple:
+    """What phases 1 and 2 of ``estimator`` depend on besides the meshes: its options for
+    them, the starts, the sizes and the spectra's sizes and first eigenvalues."""
+    e = estimator
+    return (starts, refine_to, e.n_energies, e.wks_variance, e.zoomout_samples, e.zoomout_step,
+            e.orient_weight, e.orientation_slack, e.distortion_samples, e.fit_scale,
+            e.selection_vertices, e.selection_faces, source.n_vertices, target.n_vertices,
+            tuple(np.round(np.asarray(source.evals[:4], np.float64), 10)),
+            tuple(np.round(np.asarray(target.evals[:4], np.float64), 10)))
+
+
+def resumed_choice(resume, key: tuple):
+    """The ``(run, quality)`` of phase 2 kept in ``resume`` (a `MapEstimate`), checked
+    against this call's ``key`` (`choice_key`)."""
+    choice = getattr(resume, "choice", None)
+    if not isinstance(resume, MapEstimate) or choice is None:
+        raise BSFError("resume must be a MapEstimate made from several starts (without "
+                       "landmarks, with the meshes; not through proxies)")
+    if choice[0] != key:
+        raise BSFError("resume: that estimate was made with other spectra, starts or options "
+                       "than this call's (only derived_guidance, derived_landmarks and the "
+                       "turn check may differ)")
+    return choice[1], dict(choice[2])

@@ -16,7 +16,7 @@ import numpy as np
 from ._distortion import DISTORTION_SAMPLES, ORIENTATION_SLACK, _agreements, _distortions, \
     choose_map
 from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pair_samples, \
-    check_starts, check_symmetry, to_given
+    check_starts, check_symmetry, choice_key, resumed_choice, to_given
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable, turn_mirror_size
@@ -217,7 +217,8 @@ class MapEstimator(eqx.Module):
 
     @on_one_blas_thread
     def __call__(self, source: Spectrum, target: Spectrum, landmarks=None, *, source_mesh=None,
-                 target_mesh=None, samples=None, source_symmetry=None) -> MapEstimate:
+                 target_mesh=None, samples=None, source_symmetry=None,
+                 resume: MapEstimate | None = None) -> MapEstimate:
         """Estimate the map (the phases of the class docstring).
 
         **Arguments:**
@@ -234,6 +235,11 @@ class MapEstimator(eqx.Module):
         - `source_symmetry`: the source's [`mirror_symmetry`][bsfjax.mirror_symmetry] for the
           turn check, when at hand (``transfer_collection`` computes it once for all its
           targets); default: computed here.
+        - `resume`: an estimate of the same shapes from several starts by an estimator that
+          differs from this one at most in ``derived_guidance``, ``derived_landmarks`` and the
+          turn check: its kept start (phases 1 and 2) is taken as is, and the call goes on
+          from phase 3 (``bsfjax transfer`` estimating a partial target again: 6 of its 19 s).
+          Ignored with landmarks, a single start, or proxies (a large mesh).
 
         **Returns:**
 
@@ -275,16 +281,22 @@ class MapEstimator(eqx.Module):
         rows, faces = selection_rows(self, target_mesh) if len(starts) > 1 else (None, None)
         pb = Problem(source, target, source_mesh, target_mesh, refine_to, samples, rows, faces,
                      max(k0 for k0, _ in starts + (single,)), masses, guided_to)
-        runs = [self._estimate(pb, s, lm, guide=self.landmark_guidance) for s in starts]
-        run, quality = runs[0], {}
-        if len(runs) > 1:
-            run, quality = self._choose_start(pb, starts, runs)
+        choice = None
+        if len(starts) > 1:  # (phases 1 and 2, or the kept start of an earlier call)
+            key = choice_key(self, starts, refine_to, source, target)
+            run, quality = (resumed_choice(resume, key) if resume is not None else
+                            self._choose_start(pb, starts, [
+                                self._estimate(pb, s, lm, guide=self.landmark_guidance)
+                                for s in starts]))
+            choice = (key, run, dict(quality))
             if self.derived_landmarks:
                 run, quality = self._second_estimate(pb, run, quality)
             if self.turn_check:
                 run, quality = self._check_turn(pb, run, quality, source_given,
                                                 source_symmetry)
-        return self._result(pb, run, am, an, quality)
+        else:
+            run, quality = self._estimate(pb, starts[0], lm, guide=self.landmark_guidance), {}
+        return self._result(pb, run, am, an, quality)._replace(choice=choice)
 
     @on_one_blas_thread
     def mirror_symmetry(self, spectrum: Spectrum, mesh, *, samples: Subsample | None = None,

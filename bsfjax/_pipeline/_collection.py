@@ -53,8 +53,8 @@ from .._util import BSFError
 from .._maps import face_geometry
 from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
-from .._maps import (MapEstimator, check_starts, estimate_size, estimates_again, guidable,
-                     landmark_geodesics, unguided_on_clouds)
+from .._maps import (MapEstimate, MapEstimator, check_starts, estimate_size, estimates_again,
+                     guidable, landmark_geodesics, unguided_on_clouds)
 from ._face_labels import decide_face_labels, face_label_shares
 from ._collection_rows import (SourceSymmetry, TargetTransfer, body_result, collection_estimator,
                                file_row_results, landmark_lookup, missing_parts, on_body,
@@ -99,6 +99,7 @@ class _Target(NamedTuple):
     guide: tuple | None = None  # with landmarks: ZoomOut's guidance (landmark_geodesics)
     may_again: bool = False  # its map may be estimated again (estimates_again)
     again: bool = False  # this is that second estimate
+    first: MapEstimate | None = None  # may_again: its first estimate, for the second to resume
 
 
 def _as_mesh(target) -> Mesh:
@@ -345,14 +346,16 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         if lm is None and not one_start:  # the choice among starts: the estimator's own map
             est = this(src_spec, spec, source_mesh=src_geometry, target_mesh=mesh,
                        samples=None if sub is None else (sub_m, sub),
-                       source_symmetry=source_symmetry(this))
+                       source_symmetry=source_symmetry(this),
+                       resume=firsts.pop(i, None) if again else None)
         guide = None if lm is None or not guidable(source, mesh, estimator) else \
             landmark_geodesics(source, mesh, lm, (src_spec.mass, spec.mass))
         # (a point cloud is never guided: unguided_on_clouds)
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
                        None if est is None else est.turn_doubtful, parts, n_it, prep.fill,
-                       guide, may, bool(again))  # (a second estimate: may is False)
+                       guide, may, bool(again),  # (a second estimate: may is False)
+                       est if may else None)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -429,6 +432,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                                    estimated_again=tg.again)
                 if res.missing and tg.may_again and retry is not None:
                     retry[tg.index] = res.seconds  # (a partial target: its map again)
+                    firsts[tg.index] = tg.first
                     continue
             yield tg.index, file_row_results(res, src_parts.whole, faces) if file_rows else res
 
@@ -481,6 +485,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             yield from finish(in_flight, retry)
 
     retry: dict[int, float] = {}
+    firsts: dict = {}  # (their first estimates: the second goes on from its kept start)
     yield from run(share, estimator, retry if estimate_again else None, {})
     if retry:  # partial targets: their maps again, guided by landmarks read off the first
         yield from run(list(retry), dataclasses.replace(estimator, derived_guidance=True),
