@@ -97,9 +97,8 @@ class _Target(NamedTuple):
     denoised: int = 0  # the Taubin iterations run on the main body
     fill: HoleFill | None = None  # the holes closed for its spectrum (`mesh` has them)
     guide: tuple | None = None  # with landmarks: ZoomOut's guidance (landmark_geodesics)
-    may_again: bool = False  # its map may be estimated again (estimates_again)
-    again: bool = False  # this is that second estimate
-    first: MapEstimate | None = None  # may_again: its first estimate, for the second to resume
+    again: bool = False  # this is a second estimate (estimates_again)
+    first: MapEstimate | None = None  # its first estimate where it may get a second, to resume
 
 
 def _as_mesh(target) -> Mesh:
@@ -354,8 +353,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
                        None if est is None else est.turn_doubtful, parts, n_it, prep.fill,
-                       guide, may, bool(again),  # (a second estimate: may is False)
-                       est if may else None)
+                       guide, bool(again), est if may else None)  # (again: may is False)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -430,7 +428,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             if labels:
                 res = res._replace(missing=missing_parts(res, body_vals, src_prep.body, faces),
                                    estimated_again=tg.again)
-                if res.missing and tg.may_again and retry is not None:
+                if res.missing and tg.first is not None and retry is not None:
                     retry[tg.index] = res.seconds  # (a partial target: its map again)
                     firsts[tg.index] = tg.first
                     continue
