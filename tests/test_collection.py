@@ -371,14 +371,14 @@ def test_a_target_missing_parts_is_estimated_again(collection, monkeypatch):
     import bsfjax._pipeline._collection as col
     small, targets, lm, _ = collection
     used = []
-    real = col.unguided_on_clouds
+    real = col.for_point_clouds
 
     def spy(est, *meshes):
         used.append(est.derived_guidance)
         return real(est, *meshes)
 
     real_missing = col.missing_parts
-    monkeypatch.setattr(col, "unguided_on_clouds", spy)
+    monkeypatch.setattr(col, "for_point_clouds", spy)
     monkeypatch.setattr(col, "missing_parts",  # (every target misses a part)
                         lambda *a: tuple(real_missing(*a)) or (int(small.labels[0]),))
     kw = dict(method="refined", k=10, zoomout_samples=300, landmarks=lambda i: lm.get(i))

@@ -7,7 +7,8 @@ import pytest
 
 import bsfjax as bj
 from bsfjax._maps._fmap import _from_p2p, _size_schedule, _zoomout_jit
-from bsfjax._maps._guide import estimates_again, guided_search, unguided_on_clouds
+from bsfjax._maps._guide import (CLOUD_ZOOMOUT_STEP, estimates_again, for_point_clouds,
+                                 guided_search)
 from bsfjax.internal import estimate_size, guided_zoomout, landmark_geodesics, vertex_areas
 
 from .conftest import data_path
@@ -142,12 +143,17 @@ def test_guidance_keeps_a_cut_leg_in_place(partial_pair):
     assert guided > 0.945 and guided > plain + 0.02, (plain, guided)
 
 
-def test_clouds_run_unguided(sphere_mesh):
+def test_clouds_run_unguided_with_a_larger_zoomout_step(sphere_mesh):
     est = bj.MapEstimator()
     cloud = bj.PointCloud(np.asarray(sphere_mesh.vertices))
-    assert unguided_on_clouds(est, sphere_mesh, sphere_mesh) is est
-    assert unguided_on_clouds(est, sphere_mesh, cloud).landmark_guidance == 0.0
-    assert unguided_on_clouds(est, cloud, sphere_mesh).k == est.k
+    assert for_point_clouds(est, sphere_mesh, sphere_mesh) is est
+    on_cloud = for_point_clouds(est, sphere_mesh, cloud)
+    assert on_cloud.landmark_guidance == 0.0
+    assert on_cloud.zoomout_step == CLOUD_ZOOMOUT_STEP > est.zoomout_step
+    assert on_cloud.choice_step == est.zoomout_step  # (the choice among starts: as on meshes)
+    assert for_point_clouds(est, cloud, sphere_mesh).k == est.k
+    # a step the user made larger stays theirs
+    assert for_point_clouds(bj.MapEstimator(zoomout_step=10), cloud).zoomout_step == 10
 
 
 def test_a_second_estimate_only_where_it_can_differ(sphere_mesh):

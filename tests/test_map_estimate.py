@@ -428,3 +428,36 @@ def test_resume_goes_on_from_the_kept_start():
     assert one.choice is None
     with pytest.raises(bsfjax.BSFError, match="resume must be a MapEstimate made from several"):
         guided(sm, sn, resume=one, **kw)
+
+
+def test_choice_step_compares_the_maps_at_its_step_and_grows_the_kept_one_at_zoomout_step():
+    """``choice_step``: phases 1–4 compare maps grown at that step, and the kept start's
+    ``C₀`` is grown again at ``zoomout_step``.  Without phases 3 and 4, an estimator with
+    ``zoomout_step`` 6 and ``choice_step`` 2 keeps the step-2 estimator's start and returns
+    the single-start estimate from it at step 6, bit for bit (an independent route); it takes
+    the step-2 estimate as ``resume`` (the same choice); a bad step is named."""
+    import dataclasses
+
+    small = bsfjax.example_pair(levels=1)
+    sm, sn = bsfjax.spectrum(small.source, 100), bsfjax.spectrum(small.target, 100)
+    kw = dict(source_mesh=small.source, target_mesh=small.target)
+    plain = MapEstimator(k=10, refine_to=30, zoomout_samples=300, derived_landmarks=0,
+                         turn_check=False)
+    two = plain(sm, sn, **kw)
+    both = dataclasses.replace(plain, zoomout_step=6, choice_step=2)(sm, sn, **kw)
+    assert both.start == two.start
+    alone = dataclasses.replace(plain, zoomout_step=6, starts=(two.start,))(sm, sn, **kw)
+    np.testing.assert_array_equal(both.p2p, alone.p2p)
+    assert not np.array_equal(both.p2p, two.p2p)  # (the step changes the map)
+    assert both.distortion == pytest.approx(float(bsfjax.map_distortion(
+        small.source, small.target, both.p2p[None], fit_scale=True)[0]), rel=1e-6)
+    full = dataclasses.replace(plain, derived_landmarks=20, turn_check=True)
+    first = full(sm, sn, **kw)
+    then = dataclasses.replace(full, zoomout_step=6, choice_step=2)
+    resumed = then(sm, sn, resume=first, **kw)
+    np.testing.assert_array_equal(resumed.p2p, then(sm, sn, **kw).p2p)
+    assert resumed.start == first.start
+    with pytest.raises(bsfjax.BSFError, match="other spectra, starts or options"):
+        dataclasses.replace(full, zoomout_step=6)(sm, sn, resume=first, **kw)
+    with pytest.raises(ValueError, match="choice_step must be an integer >= 1"):
+        MapEstimator(choice_step=0)

@@ -384,3 +384,32 @@ def test_collection_matches_clouds_without_landmarks():
         m = np.asarray(res.mass)
         assert i == 0 and res.labels.shape == truth.shape
         assert np.sum(m * (res.labels == truth)) / m.sum() > 0.9
+
+
+def test_collection_zooms_out_in_larger_steps_on_a_cloud_alone(monkeypatch):
+    """With landmarks, the batched stages of a cloud target run ZoomOut at
+    ``CLOUD_ZOOMOUT_STEP`` eigenpairs per iteration and a mesh target's at the estimator's
+    own step, as ``bsfjax transfer`` (``for_point_clouds``); both still label the body."""
+    import bsfjax._pipeline._collection as col
+    from bsfjax._maps import CLOUD_ZOOMOUT_STEP
+    from bsfjax.internal import example_landmarks
+
+    pair = bsfjax.example_pair(levels=2)
+    lm = example_landmarks(pair)
+    to = np.random.default_rng(1).permutation(pair.target.n_vertices)
+    cloud = bsfjax.PointCloud(pair.target.vertices[to])
+    steps = []  # per group of targets (the mesh is guided, the cloud is not: two groups)
+    real = col.dispatch_stages
+
+    def spy(cfg, *args):
+        steps.append(cfg.zoomout_step)
+        return real(cfg, *args)
+
+    monkeypatch.setattr(col, "dispatch_stages", spy)
+    landmarks = {0: (lm, lm), 1: (lm, np.argsort(to)[lm])}
+    got = dict(bsfjax.transfer_collection(pair.source, pair.labels, [pair.target, cloud], k=20,
+                                          landmarks=landmarks.get))
+    assert sorted(steps) == [2, CLOUD_ZOOMOUT_STEP]
+    for i, truth in ((0, pair.labels), (1, pair.labels[to])):
+        m = np.asarray(got[i].mass)
+        assert np.sum(m * (got[i].labels == truth)) / m.sum() > 0.9

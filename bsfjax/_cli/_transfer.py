@@ -260,7 +260,7 @@ def _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, par
     stderr."""
     import dataclasses
 
-    from .._maps import unguided_on_clouds
+    from .._maps import for_point_clouds
     from .._mesh import surface_for_map
 
     # without landmarks a point cloud gives the orientation term its stand-in surface
@@ -269,7 +269,7 @@ def _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, par
     # ZoomOut to k_map; where landmarks (given, or read off a map with --partial) guide it on
     # two triangle meshes, to every eigenpair (MapEstimator.guided_to)
     estimator = dataclasses.replace(map_estimator(args, k, k_map), derived_guidance=partial)
-    est = unguided_on_clouds(estimator, source, target)(
+    est = for_point_clouds(estimator, source, target)(
         sm, sn, landmarks, source_mesh=shapes[0], target_mesh=shapes[1], resume=resume)
     print(f"estimated a {k}x{k} map (ZoomOut to {k_map}, to {k_spec} where landmarks guide "
           "it)", file=sys.stderr)

@@ -21,8 +21,9 @@ from ._fmap import (
     check_samples, chunk_for, default_chunk, fmap_from_p2p, fmap_to_p2p, icp_refine,
     nearest_neighbors, zoomout,
 )
-from ._guide import (DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_size, estimates_again, guidable,
-                     guided_zoomout, landmark_geodesics, turn_mirror_size, unguided_on_clouds)
+from ._guide import (CLOUD_ZOOMOUT_STEP, DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_size,
+                     estimates_again, for_point_clouds, guidable, guided_zoomout,
+                     landmark_geodesics, turn_mirror_size)
 from ._orientation import OrientationBasis, face_geometry, orientation_bases
 from ._refine import (
     REFINE_EIGENPAIRS, check_options, refine_core, refine_point_maps, refinement_sizes,
@@ -30,7 +31,7 @@ from ._refine import (
 )
 
 __all__ = [
-    "DERIVED_GUIDANCE", "FmapWeights", "GUIDE_WEIGHT", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
+    "CLOUD_ZOOMOUT_STEP", "DERIVED_GUIDANCE", "FmapWeights", "GUIDE_WEIGHT", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
     "StageConfig", "check_fmap_memory", "check_landmark_pairs", "check_options", "check_samples",
     "check_starts", "choose_map", "chunk_for", "default_chunk", "estimate_fmap", "estimate_map",
     "estimate_size", "estimates_again", "guidable", "guided_zoomout", "landmark_geodesics",
@@ -38,6 +39,6 @@ __all__ = [
     "icp_refine", "map_distortion", "map_stage", "mirror_symmetry", "nearest_neighbors",
     "orientation_agreement", "orientation_bases", "point_map_stage", "problem_stage",
     "refine_core", "refine_point_maps", "refinement_sizes", "sizes_for", "source_ops_stage",
-    "turn_mirror_size", "unguided_on_clouds",
+    "turn_mirror_size", "for_point_clouds",
     "spectra", "start_point_map", "wks", "wks_energies", "zoomout",
 ]

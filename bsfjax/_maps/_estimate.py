@@ -59,12 +59,14 @@ class MapEstimate(NamedTuple):
 
 
 class Run(NamedTuple):
-    """One estimate: its initial map ``C0``, its point map (``-1`` where not searched) and the
-    map after ZoomOut it came from."""
+    """One estimate: its initial map ``C0``, its point map (``-1`` where not searched), the
+    map after ZoomOut it came from, and ZoomOut's ``(landmarks, guide)`` (to grow ``C0``
+    again at another step)."""
 
     C0: object
     p2p: np.ndarray
     C_ref: object
+    grown: tuple = (None, 0.0)
 
 
 @dataclasses.dataclass
@@ -169,7 +171,8 @@ def choice_key(estimator, starts: tuple, refine_to: int, source: Spectrum,
     """What phases 1 and 2 of ``estimator`` depend on besides the meshes: its options for
     them, the starts, the sizes and the spectra's sizes and first eigenvalues."""
     e = estimator
-    return (starts, refine_to, e.n_energies, e.wks_variance, e.zoomout_samples, e.zoomout_step,
+    step = e.zoomout_step if e.choice_step is None else e.choice_step
+    return (starts, refine_to, e.n_energies, e.wks_variance, e.zoomout_samples, step,
             e.orient_weight, e.orientation_slack, e.distortion_samples, e.fit_scale,
             e.selection_vertices, e.selection_faces, source.n_vertices, target.n_vertices,
             tuple(np.round(np.asarray(source.evals[:4], np.float64), 10)),

@@ -96,10 +96,16 @@ class MapEstimator(eqx.Module):
       turned estimates (7.0, pyFM's; in units of the energy range over the energies).
     - `zoomout_samples`: with the meshes, ZoomOut runs on this many farthest-point samples of
       each shape ([`bsfjax.subsample`][bsfjax.subsample]; 2000: on FAUST 12× fewer searches and the
-      same accuracy on 9 FAUST / FAUST_5k pairs); ``None``, or no
-      meshes: on every vertex.  The final point map is always over every vertex.
+      same accuracy on 9 FAUST / FAUST_5k pairs); ``None``, or no meshes: on every vertex.
+      The final point map is always over every vertex.
     - `zoomout_step`: eigenpairs added per ZoomOut iteration (2: half the searches of
-      ZoomOut's original step 1, the same accuracy on the 9 FAUST / FAUST_5k pairs).
+      ZoomOut's original step 1, the same accuracy on the 9 FAUST / FAUST_5k pairs;
+      ``bsfjax transfer`` and `transfer_collection` use at least 6 where a shape is a point
+      cloud, `for_point_clouds`).
+    - `choice_step`: ZoomOut's step in the maps compared in phases 1–4 (several starts),
+      the kept one grown again from its ``C₀`` at ``zoomout_step`` (``None``: that step).  On
+      a point cloud, 2 and 6 (`for_point_clouds`): compared at 6, 2 of 12 noisy FAUST clouds
+      kept a wrong map (31.4, 31.6 % instead of 92.7–93.9 %).
     - `orient_weight`: weight of the orientation term of [`bsfjax.estimate_fmap`][bsfjax.estimate_fmap]
       without landmarks but with the meshes (1.0; docs/results/segmentation.md, "Real
       segmentations").
@@ -167,6 +173,7 @@ class MapEstimator(eqx.Module):
     wks_variance: float = eqx.field(static=True, default=7.0)
     zoomout_samples: int | None = eqx.field(static=True, default=2000)
     zoomout_step: int = eqx.field(static=True, default=2)
+    choice_step: int | None = eqx.field(static=True, default=None)
     orient_weight: float = eqx.field(static=True, default=1.0)
     starts: tuple | None = eqx.field(static=True, default=None)
     landmark_free_starts: tuple = eqx.field(static=True, default=tuple(
@@ -191,6 +198,8 @@ class MapEstimator(eqx.Module):
     def __check_init__(self):
         # (k, refine_to, n_energies, starts, zoomout_samples: checked against the shapes)
         check_int(self.zoomout_step, "zoomout_step", 1)
+        if self.choice_step is not None:
+            check_int(self.choice_step, "choice_step", 1)
         check_int(self.derived_landmarks, "derived_landmarks", 0)
         if not isinstance(self.derived_guidance, (bool, np.bool_)):
             raise BSFError(f"derived_guidance must be True or False, got "
@@ -237,9 +246,8 @@ class MapEstimator(eqx.Module):
           targets); default: computed here.
         - `resume`: an estimate of the same shapes from several starts by an estimator that
           differs from this one at most in ``derived_guidance``, ``derived_landmarks`` and the
-          turn check: its kept start (phases 1 and 2) is taken as is, and the call goes on
-          from phase 3 (``bsfjax transfer`` estimating a partial target again: 6 of its 19 s).
-          Ignored with landmarks, a single start, or proxies (a large mesh).
+          turn check: its kept start (phases 1 and 2) is taken as is, the call goes on from
+          phase 3.  Ignored with landmarks, a single start, or proxies (a large mesh).
 
         **Returns:**
 
@@ -284,16 +292,20 @@ class MapEstimator(eqx.Module):
         choice = None
         if len(starts) > 1:  # (phases 1 and 2, or the kept start of an earlier call)
             key = choice_key(self, starts, refine_to, source, target)
+            chooser = (self if self.choice_step in (None, self.zoomout_step) else  # compares
+                       dataclasses.replace(self, zoomout_step=self.choice_step, choice_step=None))
             run, quality = (resumed_choice(resume, key) if resume is not None else
-                            self._choose_start(pb, starts, [
-                                self._estimate(pb, s, lm, guide=self.landmark_guidance)
+                            chooser._choose_start(pb, starts, [
+                                chooser._estimate(pb, s, lm, guide=self.landmark_guidance)
                                 for s in starts]))
             choice = (key, run, dict(quality))
             if self.derived_landmarks:
-                run, quality = self._second_estimate(pb, run, quality)
+                run, quality = chooser._second_estimate(pb, run, quality)
             if self.turn_check:
-                run, quality = self._check_turn(pb, run, quality, source_given,
-                                                source_symmetry)
+                run, quality = chooser._check_turn(pb, run, quality, source_given,
+                                                   source_symmetry)
+            if chooser is not self:
+                run, quality = self._grow_again(pb, run, quality)
         else:
             run, quality = self._estimate(pb, starts[0], lm, guide=self.landmark_guidance), {}
         return self._result(pb, run, am, an, quality)._replace(choice=choice)
@@ -307,8 +319,8 @@ class MapEstimator(eqx.Module):
         The functional map of ``M`` to itself from WKS descriptors with the
         orientation-*reversing* term ([`bsfjax.estimate_fmap`][bsfjax.estimate_fmap],
         ``orientation="reversing"``, weight ``orient_weight``) at ``k × k``, ZoomOut to
-        ``refine_to``, then the point map: the self-map of phase 1 with the orientation term
-        turned around.
+        ``refine_to`` (at ``choice_step``), then the point map: the self-map of phase 1 with
+        the orientation term turned around.
 
         Where it keeps the orientation on more than ``orientation_slack`` of the area (fallen
         part of the way to the identity: FAUST ``tr_reg_002``), every start of
@@ -364,19 +376,30 @@ class MapEstimator(eqx.Module):
             descriptors(s, self.n_energies, k0, variance,
                         None if landmarks is None else landmarks[i])
             for i, s in enumerate((pb.source, pb.target))), k=k0, **extra)
-        C_ref = C0
+        return self._grow(pb, C0, landmarks, guide)
+
+    def _grow(self, pb: Problem, C0, landmarks, guide: float) -> Run:
+        """ZoomOut from ``C0`` at ``zoomout_step`` (as `_estimate` says), the point map."""
+        C_ref, k0 = C0, C0.shape[0]
         if (pb.guided_to > k0 and guide and landmarks is not None
                 and guidable(pb.source_mesh, pb.target_mesh, self)):
             C_ref = estimate_zoomout(pb, C0, landmarks, self.zoomout_step, guide)
         elif pb.refine_to > k0:
             C_ref = zoomout(C0, pb.source, pb.target, pb.refine_to, step=self.zoomout_step,
                             samples=pb.samples)
-        if pb.rows is None:
-            return Run(C0, np.asarray(fmap_to_p2p(C_ref, pb.source, pb.target)), C_ref)
-        p2p = np.full(pb.target.n_vertices, -1, np.int64)
-        p2p[pb.rows] = np.asarray(fmap_to_p2p(C_ref, pb.source, pb.target,
-                                                rows=pb.rows))
-        return Run(C0, p2p, C_ref)
+        p2p = found = np.asarray(fmap_to_p2p(C_ref, pb.source, pb.target, rows=pb.rows))
+        if pb.rows is not None:  # (-1 where not searched)
+            p2p = np.full(pb.target.n_vertices, -1, np.int64)
+            p2p[pb.rows] = found
+        return Run(C0, p2p, C_ref, (landmarks, guide))
+
+    def _grow_again(self, pb: Problem, run: Run, quality: dict) -> tuple:
+        """The kept run (compared at ``choice_step``) grown again from its ``C0`` at
+        ``zoomout_step``, with its distortion and orientation agreement."""
+        run = self._grow(pb, run.C0, *run.grown)
+        orient = _agreements(pb.source_mesh, pb.target_mesh, run.p2p[None], pb.faces)
+        return run, dict(quality, distortion=float(self._distortion(pb, run.p2p)[0]),
+                         orientation=float(orient[0]))
 
     def _distortion(self, pb: Problem, candidates, n_samples=None, radius=None):
         """The geodesic distortions of candidate point maps (local ones with ``radius``)."""

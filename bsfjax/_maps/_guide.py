@@ -56,7 +56,7 @@ from ._fmap import _from_p2p, _nearest
 
 __all__ = ["DERIVED_GUIDANCE", "GUIDE_WEIGHT", "estimate_size", "estimates_again", "guidable",
            "estimate_zoomout", "guided_zoomout", "landmark_geodesics", "turn_mirror_size",
-           "unguided_on_clouds"]
+           "for_point_clouds", "CLOUD_ZOOMOUT_STEP"]
 
 #: The quantile of the distances to a landmark whose ratio between the shapes estimates ``σ``.
 SCALE_QUANTILE = 0.3
@@ -71,6 +71,19 @@ GUIDE_WEIGHT = 1.5
 #: and 0.5 kept holed and noisy targets within 0.6 points of the unguided labels on average
 #: where 1 lost 0.7–0.9 on some.
 DERIVED_GUIDANCE = 0.5
+#: ZoomOut's eigenpairs per iteration where a shape is a point cloud (`for_point_clouds`;
+#: 2 on meshes).  Each ZoomOut iteration refits ``C`` to a nearest-neighbour map, and on a
+#: noisy cloud's Laplacian every refit at a small step moves the map a little further from
+#: the truth: from the exact ``C`` at 30 eigenpairs, step 2 drifted from 93.4 % to 93.0 % at
+#: 60 and 92.1 % at 100 (the exact map reads 95.7 / 95.6 % in those bases; 002→012), and the
+#: exact ``30 × 30`` map grown to 60 then ``refined`` labelled 1.3–2.0 points more at step 6
+#: than at 2 on three pairs.  On the noisy 15K clouds of FAUST 000→010, 001→011, 002→012,
+#: ``bsfjax transfer`` with 5 landmarks labelled 92.63 % on average with step 2, 93.37 with
+#: 4, 93.36 with 6, 93.34 with 8, 92.98 with 10, 91.72 with 30: a plateau from 4 to 8; 6,
+#: the fewer searches.  Without landmarks only the kept map grows at this step
+#: (``choice_step``): the candidates compared at 6 sent 2 of 12 clouds to a wrong map
+#: (docs/results/scans.md, "Point clouds").
+CLOUD_ZOOMOUT_STEP = 6
 
 
 def _quantile(x: np.ndarray, w: np.ndarray, q: float) -> float:
@@ -80,14 +93,20 @@ def _quantile(x: np.ndarray, w: np.ndarray, q: float) -> float:
     return float(x[order][min(np.searchsorted(cum, q * cum[-1]), len(x) - 1)])
 
 
-def unguided_on_clouds(estimator, *shapes):
-    """``estimator`` for a landmark-free map between ``shapes`` (as read): with
-    ``landmark_guidance`` 0 where one is a point cloud.  Its estimates run on stand-in
-    surfaces (`surface_for_map`) whose Dijkstra distances the noise
-    lengthens unevenly: guided by the landmarks read off a map (``derived_guidance``), noisy
-    15K clouds of FAUST 000→010 labelled 89.8 / 89.7 % instead of 92.7 / 93.5 %."""
+def for_point_clouds(estimator, *shapes):
+    """``estimator`` for a map between ``shapes`` (as read): where one is a point cloud,
+    with ``landmark_guidance`` 0 and ``zoomout_step`` at least `CLOUD_ZOOMOUT_STEP` (the
+    choice among starts at the given step: ``choice_step``).
+
+    Unguided: its landmark-free estimates run on stand-in surfaces (`surface_for_map`) whose
+    Dijkstra distances the noise lengthens unevenly; guided by the landmarks read off a map
+    (``derived_guidance``), noisy 15K clouds of FAUST 000→010 labelled 89.8 / 89.7 % instead
+    of 92.7 / 93.5 %.  The larger step: see `CLOUD_ZOOMOUT_STEP`."""
     if any(getattr(m, "is_point_cloud", False) for m in shapes):
-        return dataclasses.replace(estimator, landmark_guidance=0.0)
+        step = estimator.zoomout_step
+        return dataclasses.replace(
+            estimator, landmark_guidance=0.0, zoomout_step=max(step, CLOUD_ZOOMOUT_STEP),
+            choice_step=step if estimator.choice_step is None else estimator.choice_step)
     return estimator
 
 

@@ -61,7 +61,8 @@ def _self_fmap(est, spectrum: Spectrum, mesh, refine_to: int, samples, start, ba
                        **geometry)
     if refine_to <= k0:
         return C0
-    return zoomout(C0, spectrum, spectrum, refine_to, step=est.zoomout_step,
+    step = est.zoomout_step if est.choice_step is None else est.choice_step  # (a comparison's)
+    return zoomout(C0, spectrum, spectrum, refine_to, step=step,
                    samples=None if samples is None else (samples, samples))
 
 

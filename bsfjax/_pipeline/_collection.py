@@ -54,7 +54,7 @@ from .._maps import face_geometry
 from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
 from .._maps import (MapEstimate, MapEstimator, check_starts, estimate_size, estimates_again,
-                     guidable, landmark_geodesics, unguided_on_clouds)
+                     for_point_clouds, guidable, landmark_geodesics)
 from ._face_labels import decide_face_labels, face_label_shares
 from ._collection_rows import (SourceSymmetry, TargetTransfer, body_result, collection_estimator,
                                file_row_results, landmark_lookup, missing_parts, on_body,
@@ -99,6 +99,7 @@ class _Target(NamedTuple):
     guide: tuple | None = None  # with landmarks: ZoomOut's guidance (landmark_geodesics)
     again: bool = False  # this is a second estimate (estimates_again)
     first: MapEstimate | None = None  # its first estimate where it may get a second, to resume
+    step: int = 2  # ZoomOut's eigenpairs per iteration (for_point_clouds: more on a cloud)
 
 
 def _as_mesh(target) -> Mesh:
@@ -219,7 +220,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
       defaults); its ``k`` and ``refine_to`` are replaced by ``k`` and ``2k``.  Given, it
       holds ``n_energies``, ``zoomout_samples`` and ``starts``: leave those arguments out.
       The batched stages follow its ``wks_variance``, ``orient_weight`` and
-      ``zoomout_step``, the targets without landmarks (several starts) all of it.
+      ``zoomout_step`` (at least 6 on a point cloud: `bsfjax._maps.for_point_clouds`), the
+      targets without landmarks (several starts) all of it.
     - `denoise`: ``True`` (default) computes the source's and every target's spectrum, map
       and transfer on [`bsfjax.denoise`][bsfjax.denoise]'s geometry with the strength chosen
       from each mesh (none on a clean mesh); the labels are on the original vertices, and
@@ -335,7 +337,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             raise BSFError(f"{mesh.name or f'target {i}'}: per-triangle labels need a triangle "
                            "target; a point cloud has none")
         spec = spectrum(mesh, k_spec, cache_dir=spectrum_cache)
-        this = unguided_on_clouds(estimator, source, mesh)  # (a point cloud: unguided)
+        this = for_point_clouds(estimator, source, mesh)  # (a point cloud: unguided, step 6)
         may = estimates_again(estimator, lm, source, mesh, k_map)  # (before the stand-in)
         if lm is None:  # (the orientation term's triangles: a point cloud's stand-in surface)
             mesh = surface_for_map(mesh)
@@ -349,11 +351,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                        resume=firsts.pop(i, None) if again else None)
         guide = None if lm is None or not guidable(source, mesh, estimator) else \
             landmark_geodesics(source, mesh, lm, (src_spec.mass, spec.mass))
-        # (a point cloud is never guided: unguided_on_clouds)
+        # (a point cloud is never guided: for_point_clouds)
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
                        None if est is None else est.turn_doubtful, parts, n_it, prep.fill,
-                       guide, bool(again), est if may else None)  # (again: may is False)
+                       guide, bool(again), est if may else None,  # (again: may is False)
+                       this.zoomout_step)
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -374,10 +377,10 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     def launch(key, group: list[_Target]):
         """Dispatch a group (not awaited: the next target's eigensolve runs meanwhile)."""
-        (n_b, m_b, p, s_b), guided = key
+        (n_b, m_b, p, s_b), guided, step = key
         cfg = StageConfig(method, k, estimate_size(k, k_spec, guided), k_spec,
                           n_energies, p, chunk, zo_chunk, estimator.wks_variance,
-                          estimator.orient_weight, estimator.zoomout_step,
+                          estimator.orient_weight, step,
                           estimator.landmark_guidance)
         if p not in on_device:
             src_arrays = cast_tree(dict(rep, **(rep_orient if p == 0 else {})))
@@ -467,7 +470,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 yield i, exc
                 continue
             key = (_bucket_key(tg, pad, tg.landmarks is None, zoomout_samples, merged),
-                   tg.guide is not None)  # (guided: ZoomOut to k_spec, estimate_size)
+                   tg.guide is not None, tg.step)  # (guided: ZoomOut to k_spec, estimate_size)
             pending.setdefault(key, []).append(tg)
             if len(pending[key]) == len(devices) * batch:  # `batch` targets per device
                 launched = launch(key, pending.pop(key))
