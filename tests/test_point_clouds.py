@@ -361,6 +361,7 @@ def test_the_refined_pull_back_drops_the_descriptors_on_a_pair_with_a_cloud(sphe
     cloud = bsfjax.PointCloud(_sphere_points(100))
     got = method_for_shapes("refined", sphere_mesh, cloud)
     assert isinstance(got, bsfjax.RefinedPullBack) and got.descriptor_weight == 0
+    assert (got.step, got.n_vote) == (10, 5) and bsfjax.RefinedPullBack().n_vote == 1
     assert bsfjax.RefinedPullBack().descriptor_weight > 0
     assert method_for_shapes("refined", sphere_mesh, sphere_mesh) == "refined"
     mine = bsfjax.RefinedPullBack(descriptor_weight=0.3)
@@ -389,7 +390,8 @@ def test_collection_matches_clouds_without_landmarks():
 def test_collection_zooms_out_in_larger_steps_on_a_cloud_alone(monkeypatch):
     """With landmarks, the batched stages of a cloud target run ZoomOut at
     ``CLOUD_ZOOMOUT_STEP`` eigenpairs per iteration and a mesh target's at the estimator's
-    own step, as ``bsfjax transfer`` (``for_point_clouds``); both still label the body."""
+    own step, and the cloud's refined pull-back votes, as ``bsfjax transfer``
+    (``for_point_clouds``, ``method_for_shapes``); both still label the body."""
     import bsfjax._pipeline._collection as col
     from bsfjax._maps import CLOUD_ZOOMOUT_STEP
     from bsfjax.internal import example_landmarks
@@ -398,11 +400,12 @@ def test_collection_zooms_out_in_larger_steps_on_a_cloud_alone(monkeypatch):
     lm = example_landmarks(pair)
     to = np.random.default_rng(1).permutation(pair.target.n_vertices)
     cloud = bsfjax.PointCloud(pair.target.vertices[to])
-    steps = []  # per group of targets (the mesh is guided, the cloud is not: two groups)
+    steps, votes = [], []  # per group of targets (the mesh is guided, the cloud not: two)
     real = col.dispatch_stages
 
     def spy(cfg, *args):
         steps.append(cfg.zoomout_step)
+        votes.append(cfg.method.n_vote)
         return real(cfg, *args)
 
     monkeypatch.setattr(col, "dispatch_stages", spy)
@@ -410,6 +413,7 @@ def test_collection_zooms_out_in_larger_steps_on_a_cloud_alone(monkeypatch):
     got = dict(bsfjax.transfer_collection(pair.source, pair.labels, [pair.target, cloud], k=20,
                                           landmarks=landmarks.get))
     assert sorted(steps) == [2, CLOUD_ZOOMOUT_STEP]
+    assert sorted(zip(steps, votes)) == [(2, 1), (CLOUD_ZOOMOUT_STEP, 5)]  # (method_for_shapes)
     for i, truth in ((0, pair.labels), (1, pair.labels[to])):
         m = np.asarray(got[i].mass)
         assert np.sum(m * (got[i].labels == truth)) / m.sum() > 0.9

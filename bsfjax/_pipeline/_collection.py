@@ -62,7 +62,8 @@ from ._collection_rows import (SourceSymmetry, TargetTransfer, body_result, coll
 from .._metrics import labels_to_indicators
 from .._mesh import (HoleFill, MainBody, Mesh, as_mesh, as_strength, is_mesh_like, load_mesh,
                      prepare_scan, surface_for_map)
-from .._transfer import BSF, GeodesicBalls, SaturatedHeat, as_method, method_name
+from .._transfer import (BSF, GeodesicBalls, SaturatedHeat, as_method, method_for_shapes,
+                         method_name)
 from .._maps import REFINE_EIGENPAIRS
 from .._sampling import Subsample, subsample
 from .._spectral import Spectrum, map_to_unit_area, spectrum, unit_area, unit_area_pair
@@ -100,6 +101,7 @@ class _Target(NamedTuple):
     again: bool = False  # this is a second estimate (estimates_again)
     first: MapEstimate | None = None  # its first estimate where it may get a second, to resume
     step: int = 2  # ZoomOut's eigenpairs per iteration (for_point_clouds: more on a cloud)
+    method: object = None  # its transfer's (method_for_shapes: a cloud's options)
 
 
 def _as_mesh(target) -> Mesh:
@@ -254,7 +256,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
     if errors not in ("raise", "report"):
         raise BSFError(f"errors must be 'raise' or 'report', got {errors!r}")
     check_int(batch, "batch", 1)
-    method = as_method(method)
+    named, method = method, as_method(method)  # (named: method_for_shapes adapts "refined")
     if method_name(method) == "std2":
         raise BSFError("method 'std2' needs a 2k x 2k map: not supported by transfer_collection")
     capped_batch(batch, check_int(k, "k", 2))  # (the dense systems: before any work)
@@ -356,7 +358,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                        None if est is None else est.p2p,
                        None if est is None else est.turn_doubtful, parts, n_it, prep.fill,
                        guide, bool(again), est if may else None,  # (again: may is False)
-                       this.zoomout_step)
+                       this.zoomout_step, as_method(method_for_shapes(named, source, prep.mesh)))
 
     devices = jax.local_devices()
     on_device: dict[int, list] = {}  # the source arrays, placed once per device and bucket kind
@@ -377,8 +379,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
 
     def launch(key, group: list[_Target]):
         """Dispatch a group (not awaited: the next target's eigensolve runs meanwhile)."""
-        (n_b, m_b, p, s_b), guided, step = key
-        cfg = StageConfig(method, k, estimate_size(k, k_spec, guided), k_spec,
+        (n_b, m_b, p, s_b), guided, step, this_method = key
+        cfg = StageConfig(this_method, k, estimate_size(k, k_spec, guided), k_spec,
                           n_energies, p, chunk, zo_chunk, estimator.wks_variance,
                           estimator.orient_weight, step,
                           estimator.landmark_guidance)
@@ -470,7 +472,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 yield i, exc
                 continue
             key = (_bucket_key(tg, pad, tg.landmarks is None, zoomout_samples, merged),
-                   tg.guide is not None, tg.step)  # (guided: ZoomOut to k_spec, estimate_size)
+                   tg.guide is not None, tg.step, tg.method)  # (guided: to k_spec)
             pending.setdefault(key, []).append(tg)
             if len(pending[key]) == len(devices) * batch:  # `batch` targets per device
                 launched = launch(key, pending.pop(key))
