@@ -16,7 +16,7 @@ import numpy as np
 from ._distortion import DISTORTION_SAMPLES, ORIENTATION_SLACK, _agreements, _distortions, \
     choose_map
 from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pair_samples, \
-    check_starts, check_symmetry, choice_key, resumed_choice, to_given
+    check_starts, check_symmetry, choice_key, comparison_step, resumed_choice, to_given
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable, turn_mirror_size
@@ -292,8 +292,9 @@ class MapEstimator(eqx.Module):
         choice = None
         if len(starts) > 1:  # (phases 1 and 2, or the kept start of an earlier call)
             key = choice_key(self, starts, refine_to, source, target)
-            chooser = (self if self.choice_step in (None, self.zoomout_step) else  # compares
-                       dataclasses.replace(self, zoomout_step=self.choice_step, choice_step=None))
+            step = comparison_step(self)  # (phases 1-4 compare at it; the kept run regrows)
+            chooser = (self if step == self.zoomout_step else
+                       dataclasses.replace(self, zoomout_step=step, choice_step=None))
             run, quality = (resumed_choice(resume, key) if resume is not None else
                             chooser._choose_start(pb, starts, [
                                 chooser._estimate(pb, s, lm, guide=self.landmark_guidance)
@@ -394,8 +395,7 @@ class MapEstimator(eqx.Module):
         return Run(C0, p2p, C_ref, (landmarks, guide))
 
     def _grow_again(self, pb: Problem, run: Run, quality: dict) -> tuple:
-        """The kept run (compared at ``choice_step``) grown again from its ``C0`` at
-        ``zoomout_step``, with its distortion and orientation agreement."""
+        """The kept run grown again from its ``C0`` at ``zoomout_step``, its quality anew."""
         run = self._grow(pb, run.C0, *run.grown)
         orient = _agreements(pb.source_mesh, pb.target_mesh, run.p2p[None], pb.faces)
         return run, dict(quality, distortion=float(self._distortion(pb, run.p2p)[0]),

@@ -52,6 +52,7 @@ import numpy as np
 from jax import lax
 
 from ._distortion import SCALE_RANGE, _capped
+from ._estimate import comparison_step
 from ._fmap import _from_p2p, _nearest
 
 __all__ = ["DERIVED_GUIDANCE", "GUIDE_WEIGHT", "estimate_size", "estimates_again", "guidable",
@@ -103,10 +104,10 @@ def for_point_clouds(estimator, *shapes):
     (``derived_guidance``), noisy 15K clouds of FAUST 000→010 labelled 89.8 / 89.7 % instead
     of 92.7 / 93.5 %.  The larger step: see `CLOUD_ZOOMOUT_STEP`."""
     if any(getattr(m, "is_point_cloud", False) for m in shapes):
-        step = estimator.zoomout_step
         return dataclasses.replace(
-            estimator, landmark_guidance=0.0, zoomout_step=max(step, CLOUD_ZOOMOUT_STEP),
-            choice_step=step if estimator.choice_step is None else estimator.choice_step)
+            estimator, landmark_guidance=0.0,
+            zoomout_step=max(estimator.zoomout_step, CLOUD_ZOOMOUT_STEP),
+            choice_step=comparison_step(estimator))
     return estimator
 
 
