@@ -150,7 +150,7 @@ def test_clouds_run_unguided_with_a_larger_zoomout_step(sphere_mesh):
     on_cloud = for_point_clouds(est, sphere_mesh, cloud)
     assert on_cloud.landmark_guidance == 0.0
     assert on_cloud.zoomout_step == CLOUD_ZOOMOUT_STEP > est.zoomout_step
-    assert on_cloud.choice_step == est.zoomout_step  # (the choice among starts: as on meshes)
+    assert on_cloud.turn_step == est.zoomout_step  # (the turn check: as on meshes)
     assert for_point_clouds(est, cloud, sphere_mesh).k == est.k
     # a step the user made larger stays theirs
     assert for_point_clouds(bj.MapEstimator(zoomout_step=10), cloud).zoomout_step == 10

@@ -430,34 +430,46 @@ def test_resume_goes_on_from_the_kept_start():
         guided(sm, sn, resume=one, **kw)
 
 
-def test_choice_step_compares_the_maps_at_its_step_and_grows_the_kept_one_at_zoomout_step():
-    """``choice_step``: phases 1–4 compare maps grown at that step, and the kept start's
-    ``C₀`` is grown again at ``zoomout_step``.  Without phases 3 and 4, an estimator with
-    ``zoomout_step`` 6 and ``choice_step`` 2 keeps the step-2 estimator's start and returns
-    the single-start estimate from it at step 6, bit for bit (an independent route); it takes
-    the step-2 estimate as ``resume`` (the same choice); a bad step is named."""
+def test_turn_step_grows_the_turn_checks_maps_at_its_step_and_the_kept_one_at_zoomout_step(
+        monkeypatch):
+    """``turn_step``: phases 1–3 grow their maps at ``zoomout_step``, phase 4 its maps (the
+    kept one, the turned ones, the source's mirror symmetry) at ``turn_step``, and the map it
+    keeps is grown again at ``zoomout_step``.  With ``zoomout_step`` 6 and ``turn_step`` 2 the
+    estimate keeps the start of the step-6 estimator without phase 4 and, where the check
+    keeps the map, returns that estimate bit for bit (an independent route), its distortion
+    that of the returned map; ZoomOut ran at both steps, where ``turn_step`` ``None`` runs
+    at 6 alone; it resumes from a step-6 estimate, not from a step-2 one; a bad step is
+    named."""
     import dataclasses
+
+    from bsfjax._maps import _estimator, _turn
 
     small = bsfjax.example_pair(levels=1)
     sm, sn = bsfjax.spectrum(small.source, 100), bsfjax.spectrum(small.target, 100)
     kw = dict(source_mesh=small.source, target_mesh=small.target)
-    plain = MapEstimator(k=10, refine_to=30, zoomout_samples=300, derived_landmarks=0,
-                         turn_check=False)
-    two = plain(sm, sn, **kw)
-    both = dataclasses.replace(plain, zoomout_step=6, choice_step=2)(sm, sn, **kw)
-    assert both.start == two.start
-    alone = dataclasses.replace(plain, zoomout_step=6, starts=(two.start,))(sm, sn, **kw)
-    np.testing.assert_array_equal(both.p2p, alone.p2p)
-    assert not np.array_equal(both.p2p, two.p2p)  # (the step changes the map)
-    assert both.distortion == pytest.approx(float(bsfjax.map_distortion(
-        small.source, small.target, both.p2p[None], fit_scale=True)[0]), rel=1e-6)
-    full = dataclasses.replace(plain, derived_landmarks=20, turn_check=True)
-    first = full(sm, sn, **kw)
-    then = dataclasses.replace(full, zoomout_step=6, choice_step=2)
-    resumed = then(sm, sn, resume=first, **kw)
+    six = MapEstimator(k=10, refine_to=30, zoomout_samples=300, zoomout_step=6,
+                       derived_landmarks=0, turn_check=False)
+    unchecked = six(sm, sn, **kw)
+    steps = []
+    for module in (_estimator, _turn):
+        def spy(*a, _zoomout=module.zoomout, **k):
+            steps.append(k["step"])
+            return _zoomout(*a, **k)
+        monkeypatch.setattr(module, "zoomout", spy)
+    checked = dataclasses.replace(six, turn_check=True, turn_step=2)(sm, sn, **kw)
+    assert set(steps) == {2, 6}
+    assert checked.start == unchecked.start and checked.swapped is False
+    np.testing.assert_array_equal(checked.p2p, unchecked.p2p)
+    assert checked.distortion == pytest.approx(float(bsfjax.map_distortion(
+        small.source, small.target, checked.p2p[None], fit_scale=True)[0]), rel=1e-6)
+    steps.clear()
+    dataclasses.replace(six, turn_check=True)(sm, sn, **kw)
+    assert set(steps) == {6}
+    then = dataclasses.replace(six, derived_landmarks=20, turn_check=True, turn_step=2)
+    resumed = then(sm, sn, resume=unchecked, **kw)
     np.testing.assert_array_equal(resumed.p2p, then(sm, sn, **kw).p2p)
-    assert resumed.start == first.start
+    assert resumed.start == unchecked.start
     with pytest.raises(bsfjax.BSFError, match="other spectra, starts or options"):
-        dataclasses.replace(full, zoomout_step=6)(sm, sn, resume=first, **kw)
-    with pytest.raises(ValueError, match="choice_step must be an integer >= 1"):
-        MapEstimator(choice_step=0)
+        then(sm, sn, resume=dataclasses.replace(six, zoomout_step=2)(sm, sn, **kw), **kw)
+    with pytest.raises(ValueError, match="turn_step must be an integer >= 1"):
+        MapEstimator(turn_step=0)

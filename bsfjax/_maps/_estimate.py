@@ -166,11 +166,10 @@ def check_starts(starts, refine_to: int, single: tuple, default) -> tuple:
     return kept
 
 
-def comparison_step(estimator) -> int:
-    """ZoomOut's step in the maps ``estimator`` compares (its starts, the maps with landmarks
-    read off a map, the turned ones, the mirror symmetry): ``choice_step``, by default
-    ``zoomout_step``."""
-    return estimator.zoomout_step if estimator.choice_step is None else estimator.choice_step
+def turn_step(estimator) -> int:
+    """ZoomOut's step in the maps of ``estimator``'s turn check (the kept map, the turned
+    ones, the source's mirror symmetry): ``turn_step``, by default ``zoomout_step``."""
+    return estimator.zoomout_step if estimator.turn_step is None else estimator.turn_step
 
 
 def choice_key(estimator, starts: tuple, refine_to: int, source: Spectrum,
@@ -179,9 +178,8 @@ def choice_key(estimator, starts: tuple, refine_to: int, source: Spectrum,
     them, the starts, the sizes and the spectra's sizes and first eigenvalues."""
     e = estimator
     return (starts, refine_to, e.n_energies, e.wks_variance, e.zoomout_samples,
-            comparison_step(e),
-            e.orient_weight, e.orientation_slack, e.distortion_samples, e.fit_scale,
-            e.selection_vertices, e.selection_faces, source.n_vertices, target.n_vertices,
+            e.zoomout_step, e.orient_weight, e.orientation_slack, e.distortion_samples,
+            e.fit_scale, e.selection_vertices, e.selection_faces, source.n_vertices, target.n_vertices,
             tuple(np.round(np.asarray(source.evals[:4], np.float64), 10)),
             tuple(np.round(np.asarray(target.evals[:4], np.float64), 10)))
 

@@ -16,7 +16,7 @@ import numpy as np
 from ._distortion import DISTORTION_SAMPLES, ORIENTATION_SLACK, _agreements, _distortions, \
     choose_map
 from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pair_samples, \
-    check_starts, check_symmetry, choice_key, comparison_step, resumed_choice, to_given
+    check_starts, check_symmetry, choice_key, resumed_choice, to_given, turn_step
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable, turn_mirror_size
@@ -102,10 +102,11 @@ class MapEstimator(eqx.Module):
       ZoomOut's original step 1, the same accuracy on the 9 FAUST / FAUST_5k pairs;
       ``bsfjax transfer`` and `transfer_collection` use at least 6 where a shape is a point
       cloud, `for_point_clouds`).
-    - `choice_step`: ZoomOut's step in the maps compared in phases 1–4 (several starts),
-      the kept one grown again from its ``C₀`` at ``zoomout_step`` (``None``: that step).  On
-      a point cloud, 2 and 6 (`for_point_clouds`): compared at 6, 2 of 12 noisy FAUST clouds
-      kept a wrong map (31.4, 31.6 % instead of 92.7–93.9 %).
+    - `turn_step`: ZoomOut's step in the maps of phase 4 (the kept map grown again at it,
+      the turned ones, the source's mirror symmetry); the map phase 4 keeps is grown again
+      from its ``C₀`` at ``zoomout_step`` (``None``: that step throughout).  On a point cloud,
+      2 and 6 (`for_point_clouds`): phase 4 at 6 turned 2 of 12 noisy FAUST clouds (31.4,
+      31.6 % instead of 92.7–93.9 %).
     - `orient_weight`: weight of the orientation term of [`bsfjax.estimate_fmap`][bsfjax.estimate_fmap]
       without landmarks but with the meshes (1.0; docs/results/segmentation.md, "Real
       segmentations").
@@ -173,7 +174,7 @@ class MapEstimator(eqx.Module):
     wks_variance: float = eqx.field(static=True, default=7.0)
     zoomout_samples: int | None = eqx.field(static=True, default=2000)
     zoomout_step: int = eqx.field(static=True, default=2)
-    choice_step: int | None = eqx.field(static=True, default=None)
+    turn_step: int | None = eqx.field(static=True, default=None)
     orient_weight: float = eqx.field(static=True, default=1.0)
     starts: tuple | None = eqx.field(static=True, default=None)
     landmark_free_starts: tuple = eqx.field(static=True, default=tuple(
@@ -198,8 +199,8 @@ class MapEstimator(eqx.Module):
     def __check_init__(self):
         # (k, refine_to, n_energies, starts, zoomout_samples: checked against the shapes)
         check_int(self.zoomout_step, "zoomout_step", 1)
-        if self.choice_step is not None:
-            check_int(self.choice_step, "choice_step", 1)
+        if self.turn_step is not None:
+            check_int(self.turn_step, "turn_step", 1)
         check_int(self.derived_landmarks, "derived_landmarks", 0)
         if not isinstance(self.derived_guidance, (bool, np.bool_)):
             raise BSFError(f"derived_guidance must be True or False, got "
@@ -292,21 +293,16 @@ class MapEstimator(eqx.Module):
         choice = None
         if len(starts) > 1:  # (phases 1 and 2, or the kept start of an earlier call)
             key = choice_key(self, starts, refine_to, source, target)
-            step = comparison_step(self)  # (phases 1-4 compare at it; the kept run regrows)
-            chooser = (self if step == self.zoomout_step else
-                       dataclasses.replace(self, zoomout_step=step, choice_step=None))
             run, quality = (resumed_choice(resume, key) if resume is not None else
-                            chooser._choose_start(pb, starts, [
-                                chooser._estimate(pb, s, lm, guide=self.landmark_guidance)
+                            self._choose_start(pb, starts, [
+                                self._estimate(pb, s, lm, guide=self.landmark_guidance)
                                 for s in starts]))
             choice = (key, run, dict(quality))
             if self.derived_landmarks:
-                run, quality = chooser._second_estimate(pb, run, quality)
+                run, quality = self._second_estimate(pb, run, quality)
             if self.turn_check:
-                run, quality = chooser._check_turn(pb, run, quality, source_given,
-                                                   source_symmetry)
-            if chooser is not self:
-                run, quality = self._grow_again(pb, run, quality)
+                run, quality = self._check_turn(pb, run, quality, source_given,
+                                                source_symmetry)
         else:
             run, quality = self._estimate(pb, starts[0], lm, guide=self.landmark_guidance), {}
         return self._result(pb, run, am, an, quality)._replace(choice=choice)
@@ -320,7 +316,7 @@ class MapEstimator(eqx.Module):
         The functional map of ``M`` to itself from WKS descriptors with the
         orientation-*reversing* term ([`bsfjax.estimate_fmap`][bsfjax.estimate_fmap],
         ``orientation="reversing"``, weight ``orient_weight``) at ``k × k``, ZoomOut to
-        ``refine_to`` (at ``choice_step``), then the point map: the self-map of phase 1 with
+        ``refine_to`` (at ``turn_step``), then the point map: the self-map of phase 1 with
         the orientation term turned around.
 
         Where it keeps the orientation on more than ``orientation_slack`` of the area (fallen
@@ -453,6 +449,10 @@ class MapEstimator(eqx.Module):
     def _check_turn(self, pb: Problem, run: Run, quality: dict, source_given: Spectrum,
                     source_symmetry) -> tuple:
         """Phase 4: the alternatives with left and right swapped, one kept if preferred."""
+        if turn_step(self) != self.zoomout_step:  # (the maps at turn_step; the kept regrown)
+            at = dataclasses.replace(self, zoomout_step=turn_step(self), turn_step=None)
+            return self._grow_again(pb, *at._check_turn(
+                pb, *at._grow_again(pb, run, quality), source_given, source_symmetry))
         x, y = landmarks_from_map(pb.source_mesh, run.p2p, self.turn_landmarks)
         if source_symmetry is not None:
             sx = source_symmetry[x]

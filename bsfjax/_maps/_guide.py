@@ -52,7 +52,7 @@ import numpy as np
 from jax import lax
 
 from ._distortion import SCALE_RANGE, _capped
-from ._estimate import comparison_step
+from ._estimate import turn_step
 from ._fmap import _from_p2p, _nearest
 
 __all__ = ["DERIVED_GUIDANCE", "GUIDE_WEIGHT", "estimate_size", "estimates_again", "guidable",
@@ -81,9 +81,9 @@ DERIVED_GUIDANCE = 0.5
 #: than at 2 on three pairs.  On the noisy 15K clouds of FAUST 000→010, 001→011, 002→012,
 #: ``bsfjax transfer`` with 5 landmarks labelled 92.63 % on average with step 2, 93.37 with
 #: 4, 93.36 with 6, 93.34 with 8, 92.98 with 10, 91.72 with 30: a plateau from 4 to 8; 6,
-#: the fewer searches.  Without landmarks only the kept map grows at this step
-#: (``choice_step``): the candidates compared at 6 sent 2 of 12 clouds to a wrong map
-#: (docs/results/scans.md, "Point clouds").
+#: the fewer searches.  Without landmarks the starts and the derived landmarks' maps grow at
+#: it too, the turn check's maps at the given step (``turn_step``): at 6 it turned 2 of 12
+#: clouds; the starts compared at 2 kept a wrong one on 4 (docs/results/scans.md).
 CLOUD_ZOOMOUT_STEP = 6
 
 
@@ -97,7 +97,7 @@ def _quantile(x: np.ndarray, w: np.ndarray, q: float) -> float:
 def for_point_clouds(estimator, *shapes):
     """``estimator`` for a map between ``shapes`` (as read): where one is a point cloud,
     with ``landmark_guidance`` 0 and ``zoomout_step`` at least `CLOUD_ZOOMOUT_STEP` (the
-    choice among starts at the given step: ``choice_step``).
+    turn check at the given step: ``turn_step``).
 
     Unguided: its landmark-free estimates run on stand-in surfaces (`surface_for_map`) whose
     Dijkstra distances the noise lengthens unevenly; guided by the landmarks read off a map
@@ -107,7 +107,7 @@ def for_point_clouds(estimator, *shapes):
         return dataclasses.replace(
             estimator, landmark_guidance=0.0,
             zoomout_step=max(estimator.zoomout_step, CLOUD_ZOOMOUT_STEP),
-            choice_step=comparison_step(estimator))
+            turn_step=turn_step(estimator))
     return estimator
 
 

@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 
 from ._descriptors import wks
 from ._distortion import _agreements, _distortions, choose_map
-from ._estimate import comparison_step
+from ._estimate import turn_step
 from ._estimation import FmapWeights, estimate_fmap
 from ._fmap import fmap_to_p2p, zoomout
 from ._orientation import orientation_bases
@@ -62,7 +62,7 @@ def _self_fmap(est, spectrum: Spectrum, mesh, refine_to: int, samples, start, ba
                        **geometry)
     if refine_to <= k0:
         return C0
-    return zoomout(C0, spectrum, spectrum, refine_to, step=comparison_step(est),
+    return zoomout(C0, spectrum, spectrum, refine_to, step=turn_step(est),
                    samples=None if samples is None else (samples, samples))
 
 
