@@ -179,7 +179,8 @@ def choice_key(estimator, starts: tuple, refine_to: int, source: Spectrum,
     e = estimator
     return (starts, refine_to, e.n_energies, e.wks_variance, e.zoomout_samples,
             e.zoomout_step, e.orient_weight, e.orientation_slack, e.distortion_samples,
-            e.fit_scale, e.selection_vertices, e.selection_faces, source.n_vertices, target.n_vertices,
+            e.fit_scale, e.selection_vertices, e.selection_faces, source.n_vertices,
+            target.n_vertices,
             tuple(np.round(np.asarray(source.evals[:4], np.float64), 10)),
             tuple(np.round(np.asarray(target.evals[:4], np.float64), 10)))
 

@@ -102,11 +102,10 @@ class MapEstimator(eqx.Module):
       ZoomOut's original step 1, the same accuracy on the 9 FAUST / FAUST_5k pairs;
       ``bsfjax transfer`` and `transfer_collection` use at least 6 where a shape is a point
       cloud, `for_point_clouds`).
-    - `turn_step`: ZoomOut's step in the maps of phase 4 (the kept map grown again at it,
-      the turned ones, the source's mirror symmetry); the map phase 4 keeps is grown again
-      from its ``C₀`` at ``zoomout_step`` (``None``: that step throughout).  On a point cloud,
-      2 and 6 (`for_point_clouds`): phase 4 at 6 turned 2 of 12 noisy FAUST clouds (31.4,
-      31.6 % instead of 92.7–93.9 %).
+    - `turn_step`: ZoomOut's step in phase 4's maps (the kept one, the turned ones, the
+      source's mirror symmetry); a turned map it keeps grows again at ``zoomout_step``
+      (``None``: that step throughout).  Clouds: 2, the rest at 6 (`for_point_clouds`);
+      phase 4 at 6 turned 2 of 12 noisy FAUST clouds (31.4, 31.6 % against 92.7–93.9 %).
     - `orient_weight`: weight of the orientation term of [`bsfjax.estimate_fmap`][bsfjax.estimate_fmap]
       without landmarks but with the meshes (1.0; docs/results/segmentation.md, "Real
       segmentations").
@@ -301,8 +300,7 @@ class MapEstimator(eqx.Module):
             if self.derived_landmarks:
                 run, quality = self._second_estimate(pb, run, quality)
             if self.turn_check:
-                run, quality = self._check_turn(pb, run, quality, source_given,
-                                                source_symmetry)
+                run, quality = self._check_turn(pb, run, quality, source_given, source_symmetry)
         else:
             run, quality = self._estimate(pb, starts[0], lm, guide=self.landmark_guidance), {}
         return self._result(pb, run, am, an, quality)._replace(choice=choice)
@@ -449,10 +447,12 @@ class MapEstimator(eqx.Module):
     def _check_turn(self, pb: Problem, run: Run, quality: dict, source_given: Spectrum,
                     source_symmetry) -> tuple:
         """Phase 4: the alternatives with left and right swapped, one kept if preferred."""
-        if turn_step(self) != self.zoomout_step:  # (the maps at turn_step; the kept regrown)
+        if turn_step(self) != self.zoomout_step:  # (the maps at turn_step; a swap regrown)
             at = dataclasses.replace(self, zoomout_step=turn_step(self), turn_step=None)
-            return self._grow_again(pb, *at._check_turn(
-                pb, *at._grow_again(pb, run, quality), source_given, source_symmetry))
+            turned, q = at._check_turn(pb, *at._grow_again(pb, run, quality), source_given,
+                                       source_symmetry)  # (not swapped: the run as it came)
+            return self._grow_again(pb, turned, q) if q.get("swapped") else (run, dict(
+                q, distortion=quality["distortion"], orientation=quality["orientation"]))
         x, y = landmarks_from_map(pb.source_mesh, run.p2p, self.turn_landmarks)
         if source_symmetry is not None:
             sx = source_symmetry[x]
