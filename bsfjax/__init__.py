@@ -50,7 +50,8 @@ from ._transfer import (
 # functional maps
 from ._maps import (
     FmapWeights, MapEstimate, MapEstimator, choose_map, estimate_fmap, estimate_map,
-    fmap_energy, fmap_from_p2p, fmap_to_p2p, hks, icp_refine, map_distortion, mirror_symmetry,
+    fmap_energy, fmap_from_p2p, fmap_to_p2p, hks, icp_refine, map_coverage, map_distortion,
+    mirror_symmetry,
     orientation_agreement, refine_point_maps, wks, zoomout,
 )
 
@@ -111,7 +112,7 @@ __all__ = [
     "hks", "wks", "fmap_from_p2p", "fmap_to_p2p", "icp_refine", "zoomout",
     "refine_point_maps",
     "FmapWeights", "estimate_fmap", "fmap_energy",
-    "map_distortion", "orientation_agreement",
+    "map_distortion", "orientation_agreement", "map_coverage",
     "choose_map",
     # mesh level
     "MapEstimate", "MapEstimator", "estimate_map", "mirror_symmetry", "LabelTransfer", "REGIMES",

@@ -166,8 +166,8 @@ def test_choose_map():
     assert choose_map(d, o, slack=1.0) == 2
     assert choose_map(d, o, slack=0.0) == 0
     assert choose_map([0.05, 0.05], [0.9, 0.9]) == 0  # ties: the first
-    for args, kw, msg in (((d, o[:3]), {}, "two non-empty 1-D arrays of one length"),
-                          (([], []), {}, "two non-empty"),
+    for args, kw, msg in (((d, o[:3]), {}, "non-empty 1-D arrays of one length"),
+                          (([], []), {}, "non-empty 1-D"),
                           (([np.nan, 0.1], [0.9, 0.9]), {}, "must be finite"),
                           ((d, o), {"slack": 1.5}, r"slack must be in \[0, 1\]")):
         with pytest.raises(ValueError, match=msg):

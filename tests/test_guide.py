@@ -143,7 +143,7 @@ def test_guidance_keeps_a_cut_leg_in_place(partial_pair):
     assert guided > 0.945 and guided > plain + 0.02, (plain, guided)
 
 
-def test_clouds_run_unguided_with_a_larger_zoomout_step(sphere_mesh):
+def test_clouds_run_unguided_with_a_larger_zoomout_step_and_the_coverage(sphere_mesh):
     est = bj.MapEstimator()
     cloud = bj.PointCloud(np.asarray(sphere_mesh.vertices))
     assert for_point_clouds(est, sphere_mesh, sphere_mesh) is est
@@ -151,6 +151,7 @@ def test_clouds_run_unguided_with_a_larger_zoomout_step(sphere_mesh):
     assert on_cloud.landmark_guidance == 0.0
     assert on_cloud.zoomout_step == CLOUD_ZOOMOUT_STEP > est.zoomout_step
     assert on_cloud.turn_step == est.zoomout_step  # (the turn check: as on meshes)
+    assert on_cloud.choice_coverage and not est.choice_coverage
     assert for_point_clouds(est, cloud, sphere_mesh).k == est.k
     # a step the user made larger stays theirs
     assert for_point_clouds(bj.MapEstimator(zoomout_step=10), cloud).zoomout_step == 10

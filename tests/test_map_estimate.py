@@ -56,6 +56,33 @@ def test_estimate_map_without_landmarks_uses_the_orientation_term(small_pair):
     assert not np.allclose(guided.C, ref.C)  # but the meshes guide ZoomOut (test_guide.py)
 
 
+def test_choice_coverage_weighs_the_coverage_errors_in_phase_2(small_pair):
+    """``choice_coverage``: phase 2 keeps the start that :func:`bsfjax.choose_map` picks with
+    the single-start maps' coverage errors (:func:`bsfjax.map_coverage` with the spectra's
+    masses) beside their distortions and orientations (an independent route); on these starts
+    that is another start than the distortion's alone, and the option is in the resume key."""
+    pair, sm, sn = small_pair
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    starts = ((10, 14.0), (16, 7.0), (24, 3.5), (20, 3.5))
+    maps = np.stack([estimate_map(sm, sn, k=20, refine_to=40, starts=(s,), **meshes).p2p
+                     for s in starts])
+    dist = bsfjax.map_distortion(pair.source, pair.target, maps, fit_scale=True)
+    orient = bsfjax.orientation_agreement(pair.source, pair.target, maps)
+    cover = bsfjax.map_coverage(pair.source, pair.target, maps, source_mass=sm.mass,
+                                target_mass=sn.mass)
+    with_cover = bsfjax.choose_map(dist, orient, coverage=cover)
+    assert with_cover != bsfjax.choose_map(dist, orient)
+    est = {c: MapEstimator(k=20, refine_to=40, starts=starts, derived_landmarks=0,
+                           turn_check=False, choice_coverage=c)(sm, sn, **meshes)
+           for c in (False, True)}
+    assert est[True].start == starts[with_cover]
+    assert est[False].start == starts[bsfjax.choose_map(dist, orient)]
+    np.testing.assert_array_equal(est[True].p2p, maps[with_cover])
+    with pytest.raises(ValueError, match="other spectra, starts or options"):
+        MapEstimator(k=20, refine_to=40, starts=starts, choice_coverage=True)(
+            sm, sn, **meshes, resume=est[False])
+
+
 def test_estimate_map_without_landmarks_keeps_the_best_start(small_pair):
     """Several starts: the result is the start that :func:`bsfjax.choose_map` picks from the
     single-start maps' distortion (up to a scale: ``fit_scale``) and orientation (an

@@ -3,7 +3,7 @@
 Descriptors (WKS, HKS), the descriptor-commutativity estimate of `C` (Nogneng & Ovsjanikov
 2017, solved with optimistix) with an optional orientation term, ZoomOut, conversions between
 functional and point maps, the refinement behind the `refined` method, the measures that
-choose among landmark-free maps (geodesic distortion, orientation agreement), and
+choose among landmark-free maps (geodesic distortion, orientation agreement, coverage), and
 `estimate_map`, which runs them from two spectra (and meshes) to one map.  The map stages of the
 batched collection path live here too.
 """
@@ -11,6 +11,7 @@ batched collection path live here too.
 from ._batched import (
     StageConfig, map_stage, point_map_stage, problem_stage, source_ops_stage, spectra,
 )
+from ._coverage import COVERAGE_SMOOTHING, map_coverage
 from ._descriptors import hks, hks_times, wks, wks_energies
 from ._distortion import choose_map, map_distortion, orientation_agreement
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap, fmap_energy
@@ -31,12 +32,12 @@ from ._refine import (
 )
 
 __all__ = [
-    "CLOUD_ZOOMOUT_STEP", "DERIVED_GUIDANCE", "FmapWeights", "GUIDE_WEIGHT", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
+    "CLOUD_ZOOMOUT_STEP", "COVERAGE_SMOOTHING", "DERIVED_GUIDANCE", "FmapWeights", "GUIDE_WEIGHT", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
     "StageConfig", "check_fmap_memory", "check_landmark_pairs", "check_options", "check_samples",
     "check_starts", "choose_map", "chunk_for", "default_chunk", "estimate_fmap", "estimate_map",
     "estimate_size", "estimates_again", "guidable", "guided_zoomout", "landmark_geodesics",
     "face_geometry", "fmap_energy", "fmap_from_p2p", "fmap_to_p2p", "hks", "hks_times",
-    "icp_refine", "map_distortion", "map_stage", "mirror_symmetry", "nearest_neighbors",
+    "icp_refine", "map_coverage", "map_distortion", "map_stage", "mirror_symmetry", "nearest_neighbors",
     "orientation_agreement", "orientation_bases", "point_map_stage", "problem_stage",
     "refine_core", "refine_point_maps", "refinement_sizes", "sizes_for", "source_ops_stage",
     "turn_mirror_size", "for_point_clouds",

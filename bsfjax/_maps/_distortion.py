@@ -240,25 +240,37 @@ def _agreements(source_mesh: Mesh, target_mesh: Mesh, maps: np.ndarray,
     return out
 
 
-def choose_map(distortion, orientation, *, slack: float = ORIENTATION_SLACK) -> int:
+def choose_map(distortion, orientation, *, slack: float = ORIENTATION_SLACK,
+               coverage=None) -> int:
     """Index of the map of least distortion among those within ``slack`` of the best
-    orientation agreement (ties: the first).
+    orientation agreement (ties: the first).  With ``coverage``, of least
+    ``d / min d + c / min c`` among them: each measure relative to the best value it takes
+    there, so neither needs a weight (`bsfjax._maps._coverage`).
 
     **Arguments:**
 
     - ``distortion``, ``orientation``: ``(B,)`` values of [`map_distortion`][bsfjax.map_distortion] and
       [`orientation_agreement`][bsfjax.orientation_agreement] for ``B`` candidate maps.
     - `slack`: in [0, 1].
+    - `coverage`: ``None``, or their ``(B,)`` [`map_coverage`][bsfjax.map_coverage] errors.
     """
     d = np.asarray(distortion, np.float64)
     o = np.asarray(orientation, np.float64)
-    if d.ndim != 1 or d.shape != o.shape or d.size == 0:
-        raise BSFError(f"distortion and orientation must be two non-empty 1-D arrays of one "
-                       f"length, got shapes {d.shape} and {o.shape}")
-    if not (np.all(np.isfinite(d)) and np.all(np.isfinite(o))):
-        raise BSFError("distortion and orientation must be finite")
+    c = np.zeros_like(d) if coverage is None else np.asarray(coverage, np.float64)
+    if d.ndim != 1 or d.shape != o.shape or d.shape != c.shape or d.size == 0:
+        raise BSFError(f"distortion, orientation (and coverage) must be non-empty 1-D arrays "
+                       f"of one length, got shapes {d.shape}, {o.shape}"
+                       + ("" if coverage is None else f" and {c.shape}"))
+    if not (np.all(np.isfinite(d)) and np.all(np.isfinite(o)) and np.all(np.isfinite(c))):
+        raise BSFError("distortion, orientation and coverage must be finite")
+    if np.any(c < 0):
+        raise BSFError("coverage must be >= 0")
     slack = check_real(slack, "slack")
     if not 0 <= slack <= 1:
         raise BSFError(f"slack must be in [0, 1], got {slack}")
-    keep = o >= o.max() - slack
-    return int(np.flatnonzero(keep)[np.argmin(d[keep])])
+    keep = np.flatnonzero(o >= o.max() - slack)
+    score = d[keep]
+    if coverage is not None:
+        tiny = np.finfo(np.float64).tiny  # (a measure that is 0 somewhere: that map wins it)
+        score = score / max(score.min(), tiny) + c[keep] / max(c[keep].min(), tiny)
+    return int(keep[np.argmin(score)])

@@ -10,7 +10,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._distortion import _Geodesics
+from ._coverage import coverage_errors
+from ._distortion import _Geodesics, _agreements, choose_map
 from ._orientation import orientation_bases
 from .._sampling import Subsample
 from .._spectral import Spectrum, map_to_unit_area
@@ -172,13 +173,33 @@ def turn_step(estimator) -> int:
     return estimator.zoomout_step if estimator.turn_step is None else estimator.turn_step
 
 
+def choose_start(estimator, pb: Problem, starts: tuple, runs: list, distortion) -> tuple:
+    """Phase 2 of ``estimator``: the run of ``runs`` (one per start of ``starts``)
+    [`choose_map`][bsfjax.choose_map] keeps, with the coverage errors where
+    ``choice_coverage`` says so, and its quality; ``distortion(pb, maps)`` the distortions."""
+    maps = np.stack([r.p2p for r in runs])
+    orient = _agreements(pb.source_mesh, pb.target_mesh, maps, pb.faces)
+    # choose_map picks among the maps within its slack of the best orientation: only their
+    # distortions (coverages) are needed (fewer Dijkstra sources, the same choice)
+    near = np.flatnonzero(orient >= orient.max() - estimator.orientation_slack)
+    dist = distortion(pb, maps[near])
+    cover = None
+    if estimator.choice_coverage:  # (the spectra's masses: a cloud's from its Laplacian)
+        cover = coverage_errors(pb.source_mesh, maps[near], pb.target.mass, pb.source.mass)
+    pick = choose_map(dist, orient[near], slack=estimator.orientation_slack, coverage=cover)
+    best = int(near[pick])
+    return runs[best], dict(start=starts[best], distortion=float(dist[pick]),
+                            orientation=float(orient[best]))
+
+
 def choice_key(estimator, starts: tuple, refine_to: int, source: Spectrum,
                target: Spectrum) -> tuple:
     """What phases 1 and 2 of ``estimator`` depend on besides the meshes: its options for
     them, the starts, the sizes and the spectra's sizes and first eigenvalues."""
     e = estimator
     return (starts, refine_to, e.n_energies, e.wks_variance, e.zoomout_samples,
-            e.zoomout_step, e.orient_weight, e.orientation_slack, e.distortion_samples,
+            e.zoomout_step, e.orient_weight, e.orientation_slack, e.choice_coverage,
+            e.distortion_samples,
             e.fit_scale, e.selection_vertices, e.selection_faces, source.n_vertices,
             target.n_vertices,
             tuple(np.round(np.asarray(source.evals[:4], np.float64), 10)),

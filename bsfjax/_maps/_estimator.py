@@ -16,7 +16,7 @@ import numpy as np
 from ._distortion import DISTORTION_SAMPLES, ORIENTATION_SLACK, _agreements, _distortions, \
     choose_map
 from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pair_samples, \
-    check_starts, check_symmetry, choice_key, resumed_choice, to_given, turn_step
+    check_starts, check_symmetry, choice_key, choose_start, resumed_choice, to_given, turn_step
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable, turn_mirror_size
@@ -122,6 +122,9 @@ class MapEstimator(eqx.Module):
       are compared by distortion (``ORIENTATION_SLACK`` of
       [`bsfjax.choose_map`][bsfjax.choose_map], 0.1: right maps 0.90–0.97 on the FAUST pairs, partly
       mirrored or slid ones down to 0.34).
+    - `choice_coverage`: phase 2 weighs the [`map_coverage`][bsfjax.map_coverage] errors beside
+      the distortions (``False``; on where a shape is a point cloud, `for_point_clouds`: the
+      12 noisy FAUST clouds without landmarks 10 → 11 within 4 points of the clean pairs).
     - `distortion_samples`: target samples of the geodesic distortion (that of
       [`bsfjax.map_distortion`][bsfjax.map_distortion], 100).
     - `fit_scale`: phases 2–4 take the global distortion up to a bounded scale (``True``;
@@ -179,6 +182,7 @@ class MapEstimator(eqx.Module):
     landmark_free_starts: tuple = eqx.field(static=True, default=tuple(
         (k0, v) for k0 in (16, 20, 24, 30, 40) for v in (3.5, 7.0, 14.0)))
     orientation_slack: float = eqx.field(static=True, default=ORIENTATION_SLACK)
+    choice_coverage: bool = eqx.field(static=True, default=False)
     distortion_samples: int = eqx.field(static=True, default=DISTORTION_SAMPLES)
     derived_landmarks: int = eqx.field(static=True, default=20)
     turn_check: bool = eqx.field(static=True, default=True)
@@ -405,16 +409,7 @@ class MapEstimator(eqx.Module):
 
     def _choose_start(self, pb: Problem, starts: tuple, runs: list) -> tuple:
         """Phase 2: the run [`choose_map`][bsfjax.choose_map] keeps, and its quality."""
-        maps = np.stack([r.p2p for r in runs])
-        orient = _agreements(pb.source_mesh, pb.target_mesh, maps, pb.faces)
-        # choose_map picks among the maps within its slack of the best orientation: only
-        # their distortions are needed (fewer Dijkstra sources, the same choice)
-        near = np.flatnonzero(orient >= orient.max() - self.orientation_slack)
-        dist = self._distortion(pb, maps[near])
-        pick = choose_map(dist, orient[near], slack=self.orientation_slack)
-        best = int(near[pick])
-        return runs[best], dict(start=starts[best], distortion=float(dist[pick]),
-                                orientation=float(orient[best]))
+        return choose_start(self, pb, starts, runs, self._distortion)
 
     def _derived(self, pb: Problem, p2p) -> list:
         """``derived_landmarks`` landmark pairs read off ``p2p``, and phase 1 with them: as if

@@ -96,8 +96,9 @@ def _quantile(x: np.ndarray, w: np.ndarray, q: float) -> float:
 
 def for_point_clouds(estimator, *shapes):
     """``estimator`` for a map between ``shapes`` (as read): where one is a point cloud,
-    with ``landmark_guidance`` 0 and ``zoomout_step`` at least `CLOUD_ZOOMOUT_STEP` (the
-    turn check at the given step: ``turn_step``).
+    with ``landmark_guidance`` 0, ``zoomout_step`` at least `CLOUD_ZOOMOUT_STEP` (the
+    turn check at the given step: ``turn_step``) and ``choice_coverage`` on (the distortion
+    on a noisy cloud's stand-in surface does not tell the starts apart: `bsfjax._maps._coverage`).
 
     Unguided: its landmark-free estimates run on stand-in surfaces (`surface_for_map`) whose
     Dijkstra distances the noise lengthens unevenly; guided by the landmarks read off a map
@@ -107,7 +108,7 @@ def for_point_clouds(estimator, *shapes):
         return dataclasses.replace(
             estimator, landmark_guidance=0.0,
             zoomout_step=max(estimator.zoomout_step, CLOUD_ZOOMOUT_STEP),
-            turn_step=turn_step(estimator))
+            turn_step=turn_step(estimator), choice_coverage=True)
     return estimator
 
 

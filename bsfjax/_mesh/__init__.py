@@ -20,7 +20,7 @@ from ._interop import as_mesh, is_mesh_like
 from ._mesh_write import save_mesh
 from ._subdivision import subdivide
 from ._denoise import (as_strength, auto_iterations, denoise, denoise_iterations, mesh_threshold,
-                       noise_level, surface_for_map)
+                       noise_level, surface_for_map, umbrella_operator)
 from ._cloud_surface import CloudSurface, cloud_normals, cloud_surface
 from ._holes import HoleFill, boundary_loops, fill_holes
 from ._scan import PreparedScan, prepare_scan
@@ -34,5 +34,6 @@ __all__ = [
     "denoise", "denoise_iterations", "edge_graph", "example_mesh", "example_pair",
     "graph_from_edges", "is_face_file", "knn_edges", "load_labels", "load_mesh", "mesh_edges",
     "mesh_report", "n_components", "noise_level", "prepare_scan", "read_label_file", "sample_surface",
-    "UNASSIGNED_PART", "save_labels", "save_mesh", "split_main_body", "subdivide", "vertex_areas",
+    "UNASSIGNED_PART", "save_labels", "save_mesh", "split_main_body", "subdivide",
+    "umbrella_operator", "vertex_areas",
 ]

@@ -22,7 +22,7 @@ from ._cloud_surface import cloud_surface
 from ._mesh import Mesh, PointCloud
 from ._interop import as_mesh
 
-__all__ = ["denoise", "noise_level", "denoise_iterations", "as_strength", "auto_iterations", "NOISE_THRESHOLD", "TAUBIN_LAMBDA",
+__all__ = ["umbrella_operator", "denoise", "noise_level", "denoise_iterations", "as_strength", "auto_iterations", "NOISE_THRESHOLD", "TAUBIN_LAMBDA",
            "TAUBIN_MU", "MAX_ITERATIONS", "CLOUD_NOISE_THRESHOLD", "mesh_threshold",
            "surface_for_map"]
 
@@ -43,9 +43,10 @@ CLOUD_NOISE_THRESHOLD = float("inf")
 MAX_ITERATIONS = 40
 
 
-def _umbrella(mesh: Mesh) -> sp.csr_matrix:
-    """The uniform (umbrella) averaging operator ``W``: row ``i`` averages vertex ``i``'s
-    one-ring neighbours (an isolated vertex averages to itself)."""
+def umbrella_operator(mesh: Mesh) -> sp.csr_matrix:
+    """The uniform (umbrella) averaging operator ``W`` (sparse, row-stochastic): row ``i``
+    averages vertex ``i``'s one-ring neighbours (an isolated vertex averages to itself); also
+    the coverage error's spreading (`bsfjax._maps._coverage`)."""
     n = mesh.n_vertices
     edges, _ = mesh_edges(mesh.faces)
     i = np.concatenate([edges[:, 0], edges[:, 1]])
@@ -96,7 +97,7 @@ def noise_level(mesh: Mesh) -> float:
         return cloud_noise_level(mesh.vertices)
     if mesh.n_faces == 0:
         return 0.0
-    W = _umbrella(mesh)
+    W = umbrella_operator(mesh)
     v = np.asarray(mesh.vertices)
     d = np.einsum("ij,ij->i", v - W @ v, _vertex_normals(mesh))
     r = d - W @ d
@@ -147,7 +148,7 @@ def denoise(mesh: Mesh, strength="auto") -> Mesh:
                             vertex_ids=mesh.vertex_ids, name=mesh.name)
         object.__setattr__(smooth, "file_rows", mesh.file_rows)  # (frozen: as replace does)
         return smooth
-    W = _umbrella(mesh)
+    W = umbrella_operator(mesh)
     v = np.array(mesh.vertices, dtype=np.float64)
     for _ in range(n_iter):
         v = v + TAUBIN_LAMBDA * (W @ v - v)
