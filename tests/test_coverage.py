@@ -111,6 +111,10 @@ def test_bad_inputs_are_named(sphere):
                            "source_mass must be"),
                           ((mesh, mesh, np.arange(n)), {"target_mass": -np.ones(n)},
                            "target_mass must be"),
+                          ((mesh, mesh, np.arange(n)), {"source_mass": "areas"},
+                           "source_mass must hold real numbers"),
+                          ((mesh, mesh, np.arange(n)), {"target_mass": np.full(n, np.nan)},
+                           "target_mass contains"),
                           ((cloud, mesh, np.arange(n)), {}, "coverage error needs triangles")):
         with pytest.raises(ValueError, match=msg):
             map_coverage(*args, **kw)

@@ -38,7 +38,7 @@ import numpy as np
 
 from ._distortion import _check_pair
 from .._mesh import Mesh, as_mesh, umbrella_operator, vertex_areas
-from .._util import BSFError, check_int, require_triangles
+from .._util import BSFError, check_finite, check_int, require_triangles
 
 __all__ = ["map_coverage", "COVERAGE_SMOOTHING"]
 
@@ -71,8 +71,9 @@ def coverage_errors(source_mesh: Mesh, maps: np.ndarray, target_mass, source_mas
 
 
 def _check_mass(mass, n: int, name: str) -> np.ndarray:
+    check_finite(mass, name)  # (real numbers first: a string or NaN is named as such)
     a = np.asarray(mass, np.float64)
-    if a.shape != (n,) or not np.all(np.isfinite(a)) or np.any(a < 0) or a.sum() <= 0:
+    if a.shape != (n,) or np.any(a < 0) or a.sum() <= 0:
         raise BSFError(f"{name} must be {n} finite non-negative vertex areas (not all 0), got "
                        f"shape {np.shape(mass)}")
     return a
