@@ -115,9 +115,28 @@ def test_bad_inputs_are_named(sphere):
                            "source_mass must hold real numbers"),
                           ((mesh, mesh, np.arange(n)), {"target_mass": np.full(n, np.nan)},
                            "target_mass contains"),
-                          ((cloud, mesh, np.arange(n)), {}, "coverage error needs triangles")):
+                          ((cloud, mesh, np.arange(n)), {}, "coverage error needs triangles"),
+                          ((mesh, cloud, np.arange(n)), {}, "coverage error needs triangles"),
+                          ((cloud, mesh, np.arange(n)), {"source_mass": np.ones(n),
+                                                         "target_mass": np.ones(n)},
+                           "coverage error needs triangles")):
         with pytest.raises(ValueError, match=msg):
             map_coverage(*args, **kw)
+
+
+def test_a_point_cloud_target_takes_given_areas(sphere):
+    """A point cloud target has no triangles, but with its areas given (its spectrum's mass)
+    only the source's triangles are needed: the same value as the mesh with those areas."""
+    mesh, mirror = sphere
+    n = mesh.n_vertices
+    cloud = bsfjax.PointCloud(mesh.vertices)
+    mass = np.asarray(bsfjax.spectrum(cloud, 4).mass)
+    maps = np.stack([np.arange(n), mirror, np.random.default_rng(2).integers(0, n, n)])
+    got = map_coverage(mesh, cloud, maps, target_mass=mass)
+    want = [reference_coverage(mesh, m, mass, vertex_areas(mesh), 10) for m in maps]
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(got, map_coverage(mesh, mesh, maps, target_mass=mass),
+                               rtol=1e-12)
 
 
 def test_choose_map_with_coverage():

@@ -7,7 +7,7 @@ import pytest
 
 import bsfjax as bj
 from bsfjax._maps._fmap import _from_p2p, _size_schedule, _zoomout_jit
-from bsfjax._maps._guide import (CLOUD_ZOOMOUT_STEP, estimates_again, for_point_clouds,
+from bsfjax._maps._guide import (CLOUD_ADDED_LANDMARKS, CLOUD_ZOOMOUT_STEP, estimates_again, for_point_clouds,
                                  guided_search)
 from bsfjax.internal import estimate_size, guided_zoomout, landmark_geodesics, vertex_areas
 
@@ -143,7 +143,8 @@ def test_guidance_keeps_a_cut_leg_in_place(partial_pair):
     assert guided > 0.945 and guided > plain + 0.02, (plain, guided)
 
 
-def test_clouds_run_unguided_with_a_larger_zoomout_step_and_the_coverage(sphere_mesh):
+def test_clouds_run_unguided_with_a_larger_zoomout_step_the_coverage_and_the_derived_map(
+        sphere_mesh):
     est = bj.MapEstimator()
     cloud = bj.PointCloud(np.asarray(sphere_mesh.vertices))
     assert for_point_clouds(est, sphere_mesh, sphere_mesh) is est
@@ -152,6 +153,8 @@ def test_clouds_run_unguided_with_a_larger_zoomout_step_and_the_coverage(sphere_
     assert on_cloud.zoomout_step == CLOUD_ZOOMOUT_STEP > est.zoomout_step
     assert on_cloud.turn_step == est.zoomout_step  # (the turn check: as on meshes)
     assert on_cloud.choice_coverage and not est.choice_coverage
+    assert on_cloud.keep_derived and not est.keep_derived
+    assert on_cloud.added_landmarks == CLOUD_ADDED_LANDMARKS > est.added_landmarks == 0
     assert for_point_clouds(est, cloud, sphere_mesh).k == est.k
     # a step the user made larger stays theirs
     assert for_point_clouds(bj.MapEstimator(zoomout_step=10), cloud).zoomout_step == 10

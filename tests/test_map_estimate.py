@@ -78,7 +78,7 @@ def test_choice_coverage_weighs_the_coverage_errors_in_phase_2(small_pair):
     assert est[True].start == starts[with_cover]
     assert est[False].start == starts[bsfjax.choose_map(dist, orient)]
     np.testing.assert_array_equal(est[True].p2p, maps[with_cover])
-    with pytest.raises(ValueError, match="other spectra, starts or options"):
+    with pytest.raises(ValueError, match="other spectra, meshes, starts or options"):
         MapEstimator(k=20, refine_to=40, starts=starts, choice_coverage=True)(
             sm, sn, **meshes, resume=est[False])
 
@@ -449,8 +449,16 @@ def test_resume_goes_on_from_the_kept_start():
     # (the distortions: the Dijkstra runs are shared in another order, to the last bit)
     assert resumed.start == fresh.start
     assert resumed.distortion == pytest.approx(fresh.distortion, rel=1e-12)
-    with pytest.raises(bsfjax.BSFError, match="other spectra, starts or options"):
+    with pytest.raises(bsfjax.BSFError, match="other spectra, meshes, starts or options"):
         dataclasses.replace(guided, n_energies=50)(sm, sn, resume=first, **kw)
+    # the same spectra with another target mesh (phase 2 compared the maps on the meshes)
+    moved = bsfjax.Mesh(np.asarray(small.target.vertices) * 1.01, small.target.faces)
+    with pytest.raises(bsfjax.BSFError, match="other spectra, meshes, starts or options"):
+        guided(sm, sn, resume=first, source_mesh=small.source, target_mesh=moved)
+    # the meshes rebuilt from the same arrays: the same key
+    again = {r: bsfjax.Mesh(np.array(m.vertices), np.array(m.faces))
+             for r, m in (("source_mesh", small.source), ("target_mesh", small.target))}
+    np.testing.assert_array_equal(guided(sm, sn, resume=first, **again).p2p, fresh.p2p)
     one = MapEstimator(k=10, refine_to=20, starts=((10, 7.0),))(sm, sn, **kw)
     assert one.choice is None
     with pytest.raises(bsfjax.BSFError, match="resume must be a MapEstimate made from several"):
@@ -496,7 +504,100 @@ def test_turn_step_grows_the_turn_checks_maps_at_its_step_and_the_kept_one_at_zo
     resumed = then(sm, sn, resume=unchecked, **kw)
     np.testing.assert_array_equal(resumed.p2p, then(sm, sn, **kw).p2p)
     assert resumed.start == unchecked.start
-    with pytest.raises(bsfjax.BSFError, match="other spectra, starts or options"):
+    with pytest.raises(bsfjax.BSFError, match="other spectra, meshes, starts or options"):
         then(sm, sn, resume=dataclasses.replace(six, zoomout_step=2)(sm, sn, **kw), **kw)
     with pytest.raises(ValueError, match="turn_step must be an integer >= 1"):
         MapEstimator(turn_step=0)
+
+
+def test_choose_derived_closed_form():
+    """Phase 3's choice: by ``choose_map`` (distortion within the orientation slack), or with
+    ``trust`` the first derived estimate within the slack of the best orientation."""
+    from bsfjax._maps._estimate import choose_derived
+
+    est = MapEstimator()
+    slack = est.orientation_slack
+    found = [("pairs a", "run a"), ("pairs b", "run b")]
+    q = dict(distortion=0.03, orientation=0.90)
+    # the kept run is the least distorted: kept without trust, the first derived one with it
+    dist, orient = [0.03, 0.05, 0.04], [0.90, 0.88, 0.91]
+    assert choose_derived(est, "run", q, found, dist, orient, False) == ("run", q, False)
+    run, quality, trusted = choose_derived(est, "run", q, found, dist, orient, True)
+    assert (run, trusted, quality["landmarks"]) == ("run a", True, "pairs a")
+    assert quality["distortion"] == 0.05 and quality["orientation"] == 0.88
+    # past the slack a derived estimate is not kept; the next one within it is
+    orient = [0.90, 0.90 - slack - 0.05, 0.89]
+    assert choose_derived(est, "run", q, found, dist, orient, True)[0] == "run b"
+    orient = [0.90, 0.90 - slack - 0.05, 0.90 - slack - 0.01]
+    assert choose_derived(est, "run", q, found, dist, orient, True) == ("run", q, False)
+    # where choose_map already prefers a derived estimate, trust changes nothing
+    dist, orient = [0.05, 0.03, 0.04], [0.90, 0.91, 0.90]
+    assert choose_derived(est, "run", q, found, dist, orient, True)[1:] == \
+        choose_derived(est, "run", q, found, dist, orient, False)[1:]
+    assert choose_derived(est, "run", q, found, dist, orient, True)[0] == "run a"
+    with pytest.raises(ValueError, match="keep_derived must be True or False"):
+        MapEstimator(keep_derived=1)
+
+
+def test_keep_derived_keeps_the_derived_estimate_unless_the_turn_check_doubts_it(
+        small_pair, monkeypatch):
+    """``keep_derived``: phase 3 keeps the estimate made with the landmark pairs read off the
+    kept start's map (`estimate_map` with them as given, unguided: an independent route)
+    whenever its orientation agreement is within the slack, whatever the distortions; where
+    that changed the pick and the turn check is then doubtful, phases 3 and 4 run again by the
+    distortion: the result of ``keep_derived=False``."""
+    from bsfjax._maps import _estimator
+
+    pair, sm, sn = small_pair
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    kw = dict(k=20, refine_to=40, starts=((10, 14.0), (16, 7.0)), derived_landmarks=12)
+    first = MapEstimator(**kw, turn_check=False)(sm, sn, **meshes)
+    assert first.landmarks is None  # (the distortion keeps the start's map here)
+    start = MapEstimator(**dict(kw, derived_landmarks=0), turn_check=False)(sm, sn, **meshes)
+    src, near = landmarks_from_map(pair.source, start.p2p, 12)
+    given = MapEstimator(k=20, refine_to=40, landmark_guidance=0.0)(sm, sn, (src, near),
+                                                                   **meshes)
+    orient = bsfjax.orientation_agreement(pair.source, pair.target,
+                                          np.stack([start.p2p, given.p2p]))
+    assert orient[1] >= orient.max() - MapEstimator().orientation_slack
+    kept = MapEstimator(**kw, turn_check=False, keep_derived=True)(sm, sn, **meshes)
+    np.testing.assert_array_equal(kept.p2p, given.p2p)
+    assert not np.array_equal(kept.p2p, first.p2p)
+    np.testing.assert_array_equal(kept.landmarks[0], src)
+    assert kept.distortion == pytest.approx(float(bsfjax.map_distortion(
+        pair.source, pair.target, given.p2p[None], fit_scale=True)[0]), rel=1e-6)
+    # the turn check doubtful (its choice made to keep the map it is given, in doubt): the
+    # distortion's pick, as without the option; not doubtful: the derived estimate stays
+    for doubt in (True, False):
+        monkeypatch.setattr(_estimator, "turn_choice",
+                            lambda est, pb, runs, joint, turn: (0, doubt, np.ones(len(runs))))
+        est = {c: MapEstimator(**kw, keep_derived=c)(sm, sn, **meshes) for c in (False, True)}
+        assert est[True].turn_doubtful is doubt and est[True].swapped is False
+        np.testing.assert_array_equal(est[True].p2p, (est[False] if doubt else kept).p2p)
+        assert (est[True].landmarks is None) is doubt
+
+
+def test_added_landmarks_estimate_again_with_pairs_read_off_the_first_map(small_pair):
+    """``added_landmarks``: with given landmarks and the meshes, the estimate made again with
+    the given pairs and that many read off the first map (`landmarks_from_map` on the
+    estimator's own first map: an independent route), reported in ``landmarks``; without the
+    meshes, or 0, the first map."""
+    pair, sm, sn = small_pair
+    meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
+    lm = example_landmarks(pair)
+    first = MapEstimator(k=20, refine_to=40)(sm, sn, (lm, lm), **meshes)
+    src, near = landmarks_from_map(pair.source, first.p2p, 8)
+    both = (np.concatenate([lm, src]), np.concatenate([lm, near]))
+    again = MapEstimator(k=20, refine_to=40)(sm, sn, both, **meshes)
+    est = MapEstimator(k=20, refine_to=40, added_landmarks=8)(sm, sn, (lm, lm), **meshes)
+    np.testing.assert_array_equal(est.p2p, again.p2p)
+    np.testing.assert_array_equal(est.C_initial, again.C_initial)
+    np.testing.assert_array_equal(est.landmarks[0], src)
+    np.testing.assert_array_equal(est.landmarks[1], near)
+    assert first.landmarks is None and not np.array_equal(first.C_initial, again.C_initial)
+    bare = MapEstimator(k=20, refine_to=40, added_landmarks=8)(sm, sn, (lm, lm))
+    plain = MapEstimator(k=20, refine_to=40)(sm, sn, (lm, lm))
+    np.testing.assert_array_equal(bare.p2p, plain.p2p)
+    assert bare.landmarks is None
+    with pytest.raises(ValueError, match="added_landmarks must be an integer >= 0"):
+        MapEstimator(added_landmarks=-1)

@@ -389,31 +389,42 @@ def test_collection_matches_clouds_without_landmarks():
 
 def test_collection_zooms_out_in_larger_steps_on_a_cloud_alone(monkeypatch):
     """With landmarks, the batched stages of a cloud target run ZoomOut at
-    ``CLOUD_ZOOMOUT_STEP`` eigenpairs per iteration and a mesh target's at the estimator's
-    own step, and the cloud's refined pull-back votes, as ``bsfjax transfer``
-    (``for_point_clouds``, ``method_for_shapes``); both still label the body."""
+    ``CLOUD_ZOOMOUT_STEP`` eigenpairs per iteration with pairs read off a first map beside
+    the given ones, and a mesh target's at the estimator's own step with the given pairs,
+    and the cloud's refined pull-back votes, as ``bsfjax transfer`` (``for_point_clouds``,
+    ``method_for_shapes``); both still label the body."""
     import bsfjax._pipeline._collection as col
     from bsfjax._maps import CLOUD_ZOOMOUT_STEP
+    from bsfjax._maps._guide import CLOUD_ADDED_LANDMARKS
     from bsfjax.internal import example_landmarks
 
     pair = bsfjax.example_pair(levels=2)
     lm = example_landmarks(pair)
     to = np.random.default_rng(1).permutation(pair.target.n_vertices)
     cloud = bsfjax.PointCloud(pair.target.vertices[to])
-    steps, votes = [], []  # per group of targets (the mesh is guided, the cloud not: two)
-    real = col.dispatch_stages
+    steps, votes, counts, read = [], [], [], []  # per group (mesh guided, cloud not: two)
+    real, real_read = col.dispatch_stages, col.with_read_pairs
 
     def spy(cfg, *args):
         steps.append(cfg.zoomout_step)
         votes.append(cfg.method.n_vote)
+        counts.append(cfg.n_landmarks)
         return real(cfg, *args)
 
     monkeypatch.setattr(col, "dispatch_stages", spy)
+    monkeypatch.setattr(col, "with_read_pairs", lambda *a: read.append(a) or real_read(*a))
     landmarks = {0: (lm, lm), 1: (lm, np.argsort(to)[lm])}
     got = dict(bsfjax.transfer_collection(pair.source, pair.labels, [pair.target, cloud], k=20,
                                           landmarks=landmarks.get))
     assert sorted(steps) == [2, CLOUD_ZOOMOUT_STEP]
     assert sorted(zip(steps, votes)) == [(2, 1), (CLOUD_ZOOMOUT_STEP, 5)]  # (method_for_shapes)
+    # the cloud's map: estimated with the given pairs and CLOUD_ADDED_LANDMARKS read off a
+    # first map (MapEstimator.added_landmarks), the mesh's with the given pairs alone
+    assert sorted(zip(steps, counts)) == [(2, len(lm)),
+                                          (CLOUD_ZOOMOUT_STEP, len(lm) + CLOUD_ADDED_LANDMARKS)]
+    (given, mesh, p2p, n), = read
+    np.testing.assert_array_equal(given[1], landmarks[1][1])
+    assert mesh.n_vertices == pair.source.n_vertices and n == CLOUD_ADDED_LANDMARKS
     for i, truth in ((0, pair.labels), (1, pair.labels[to])):
         m = np.asarray(got[i].mass)
         assert np.sum(m * (got[i].labels == truth)) / m.sum() > 0.9

@@ -26,6 +26,7 @@ from ._guide import (CLOUD_ZOOMOUT_STEP, DERIVED_GUIDANCE, GUIDE_WEIGHT, estimat
                      estimates_again, for_point_clouds, guidable, guided_zoomout,
                      landmark_geodesics, turn_mirror_size)
 from ._orientation import OrientationBasis, face_geometry, orientation_bases
+from ._turn import with_read_pairs
 from ._refine import (
     REFINE_EIGENPAIRS, check_options, refine_core, refine_point_maps, refinement_sizes,
     sizes_for, start_point_map,
@@ -40,6 +41,6 @@ __all__ = [
     "icp_refine", "map_coverage", "map_distortion", "map_stage", "mirror_symmetry", "nearest_neighbors",
     "orientation_agreement", "orientation_bases", "point_map_stage", "problem_stage",
     "refine_core", "refine_point_maps", "refinement_sizes", "sizes_for", "source_ops_stage",
-    "turn_mirror_size", "for_point_clouds",
+    "turn_mirror_size", "for_point_clouds", "with_read_pairs",
     "spectra", "start_point_map", "wks", "wks_energies", "zoomout",
 ]

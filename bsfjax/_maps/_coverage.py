@@ -89,7 +89,9 @@ def map_coverage(source_mesh: Mesh, target_mesh: Mesh, p2p, *, source_mass=None,
     - `p2p`: ``(n_N,)`` source vertex of each target vertex, or ``(B, n_N)`` for ``B`` maps.
     - ``source_mass``, ``target_mass``: ``(n_M,)``, ``(n_N,)`` positive vertex areas (a
       [`Spectrum`][bsfjax.Spectrum]'s ``mass``, as `MapEstimator` uses); default: the
-      meshes' barycentric vertex areas.
+      meshes' barycentric vertex areas.  The source needs triangles (it is spread along
+      them); the target only with its default areas: a point cloud target takes its
+      spectrum's ``mass``.
     - `smoothing`: one-ring averaging steps on the source (``COVERAGE_SMOOTHING``, 10; 0:
       vertex by vertex).
 
@@ -100,9 +102,13 @@ def map_coverage(source_mesh: Mesh, target_mesh: Mesh, p2p, *, source_mass=None,
     """
     source_mesh, target_mesh = (as_mesh(source_mesh, "source_mesh"),
                                 as_mesh(target_mesh, "target_mesh"))
-    for m in (source_mesh, target_mesh):  # (vertex areas, one-ring steps)
-        require_triangles(m, "the coverage error needs triangles: a point cloud has none "
-                          "(bsfjax.cloud_surface gives a cloud a stand-in surface)")
+    # the source is spread along its triangles; the target only gives areas, its own or given
+    # (a point cloud target with its Laplacian's masses)
+    for m, mass in ((source_mesh, None), (target_mesh, target_mass)):
+        if mass is None:
+            require_triangles(m, "the coverage error needs triangles on the source (and on a "
+                              "target without target_mass): a point cloud has none "
+                              "(bsfjax.cloud_surface gives a cloud a stand-in surface)")
     maps, single = _check_pair(source_mesh, target_mesh, p2p)
     smoothing = check_int(smoothing, "smoothing", 0)
     masses = [vertex_areas(m) if a is None else _check_mass(a, m.n_vertices, name)

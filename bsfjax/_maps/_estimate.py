@@ -33,8 +33,9 @@ class MapEstimate(NamedTuple):
     #: with several starts (no landmarks): the kept map's geodesic distortion
     #: ([`bsfjax.map_distortion`][bsfjax.map_distortion]) and orientation agreement
     #: ([`bsfjax.orientation_agreement`][bsfjax.orientation_agreement]), the start ``(k₀, WKS variance)`` chosen among
-    #: them, and the landmark pairs read off its map when the estimate made with them was kept;
-    #: ``None`` with landmarks or a single start
+    #: them, and the landmark pairs read off its map when the estimate made with them was kept
+    #: (with given landmarks and ``added_landmarks``: the pairs read off the first map, beside
+    #: the given ones); ``None`` otherwise, with landmarks or a single start
     distortion: float | None = None
     orientation: float | None = None
     start: tuple | None = None
@@ -192,10 +193,44 @@ def choose_start(estimator, pb: Problem, starts: tuple, runs: list, distortion) 
                             orientation=float(orient[best]))
 
 
+def choose_derived(estimator, run, quality: dict, found: list, dist: list, orient: list,
+                   trust: bool) -> tuple:
+    """Phase 3's choice of ``estimator`` between the kept ``run`` (its ``quality``) and the
+    estimates ``found`` (``[(pairs, run), ...]``) made with the landmark pairs read off it;
+    ``dist``, ``orient``: the kept run's and theirs.  [`choose_map`][bsfjax.choose_map]
+    decides; with ``trust`` (``keep_derived``) the first derived estimate whose orientation
+    is within the slack of the best is kept instead.  Returns ``(run, quality, trusted)``,
+    ``trusted`` whether ``trust`` changed the pick."""
+    pick = choose_map(dist, orient, slack=estimator.orientation_slack)
+    trusted = False
+    if trust and pick == 0:
+        near = [i for i in range(1, len(dist))
+                if orient[i] >= max(orient) - estimator.orientation_slack]
+        if near:
+            pick, trusted = near[0], True
+    if pick == 0:
+        return run, quality, False
+    return found[pick - 1][1], dict(quality, landmarks=found[pick - 1][0],
+                                    distortion=dist[pick], orientation=orient[pick]), trusted
+
+
+def mesh_key(mesh) -> tuple:
+    """A mesh's identity for `choice_key`: its sizes and a digest of its vertices and faces
+    (a mesh re-read or rebuilt from the same file has the same key)."""
+    import hashlib
+
+    digest = hashlib.blake2b(digest_size=16)
+    faces = getattr(mesh, "faces", None)
+    for a in (np.asarray(mesh.vertices, np.float64),
+              np.zeros((0, 3), np.int64) if faces is None else np.asarray(faces, np.int64)):
+        digest.update(np.ascontiguousarray(a).tobytes())
+    return (mesh.n_vertices, 0 if faces is None else len(faces), digest.hexdigest())
+
+
 def choice_key(estimator, starts: tuple, refine_to: int, source: Spectrum,
-               target: Spectrum) -> tuple:
-    """What phases 1 and 2 of ``estimator`` depend on besides the meshes: its options for
-    them, the starts, the sizes and the spectra's sizes and first eigenvalues."""
+               target: Spectrum, meshes: tuple = ()) -> tuple:
+    """What phases 1 and 2 of ``estimator`` depend on: its options for them, the starts, the
+    sizes, the spectra's sizes and first eigenvalues, and the ``meshes`` (`mesh_key`)."""
     e = estimator
     return (starts, refine_to, e.n_energies, e.wks_variance, e.zoomout_samples,
             e.zoomout_step, e.orient_weight, e.orientation_slack, e.choice_coverage,
@@ -203,7 +238,8 @@ def choice_key(estimator, starts: tuple, refine_to: int, source: Spectrum,
             e.fit_scale, e.selection_vertices, e.selection_faces, source.n_vertices,
             target.n_vertices,
             tuple(np.round(np.asarray(source.evals[:4], np.float64), 10)),
-            tuple(np.round(np.asarray(target.evals[:4], np.float64), 10)))
+            tuple(np.round(np.asarray(target.evals[:4], np.float64), 10)),
+            tuple(mesh_key(m) for m in meshes))
 
 
 def resumed_choice(resume, key: tuple):
@@ -214,7 +250,7 @@ def resumed_choice(resume, key: tuple):
         raise BSFError("resume must be a MapEstimate made from several starts (without "
                        "landmarks, with the meshes; not through proxies)")
     if choice[0] != key:
-        raise BSFError("resume: that estimate was made with other spectra, starts or options "
-                       "than this call's (only derived_guidance, derived_landmarks and the "
-                       "turn check may differ)")
+        raise BSFError("resume: that estimate was made with other spectra, meshes, starts or "
+                       "options than this call's (only derived_guidance, derived_landmarks, "
+                       "keep_derived and the turn check may differ)")
     return choice[1], dict(choice[2])

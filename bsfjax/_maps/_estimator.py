@@ -13,16 +13,16 @@ import dataclasses
 import equinox as eqx
 import numpy as np
 
-from ._distortion import DISTORTION_SAMPLES, ORIENTATION_SLACK, _agreements, _distortions, \
-    choose_map
+from ._distortion import DISTORTION_SAMPLES, ORIENTATION_SLACK, _agreements, _distortions
 from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pair_samples, \
-    check_starts, check_symmetry, choice_key, choose_start, resumed_choice, to_given, turn_step
+    check_starts, check_symmetry, choice_key, choose_derived, choose_start, resumed_choice, \
+    to_given, turn_step
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
-from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable, turn_mirror_size
+from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable
 from ._proxy import needs_proxy, proxy_estimate
 from ._turn import check_sizes, descriptors, landmarks_from_map, selection_rows, self_map, \
-    turn_choice, turn_landmark_sets
+    turn_candidates, turn_choice, with_read_pairs
 from .._sampling import Subsample, subsample
 from .._spectral import Spectrum, unit_area_pair
 from .._util import (BSFError, check_int, check_real, check_source_mesh, on_one_blas_thread,
@@ -49,7 +49,8 @@ class MapEstimator(eqx.Module):
        ``refine_to × refine_to``, ``zoomout_step`` eigenpairs per iteration, on
        ``zoomout_samples`` farthest-point samples of each shape; the point map is the nearest
        neighbour of each target row of ``Φ_N C`` among the rows of ``Φ_M``, and ``C`` the
-       ``k × k`` map of that point map.  With landmarks (or without the meshes) this is all.
+       ``k × k`` map of that point map.  With landmarks (or without the meshes) this is all
+       (``added_landmarks``: once more, with pairs read off the map beside the given ones).
     2. **The choice among starts** (no landmarks, with the meshes): every start of ``starts``
        (default ``landmark_free_starts``) runs phase 1; among the point maps whose
        orientation agreement ([`bsfjax.orientation_agreement`][bsfjax.orientation_agreement]) is
@@ -62,7 +63,8 @@ class MapEstimator(eqx.Module):
        source's farthest points, each with the target vertex whose image lies nearest), and
        phase 1 again with them at ``(k, wks_variance)``, as if they were given (with
        ``derived_guidance`` also with ZoomOut guided by them); the second map is kept if
-       [`bsfjax.choose_map`][bsfjax.choose_map] prefers it.  On the 9 FAUST / FAUST_5k
+       [`bsfjax.choose_map`][bsfjax.choose_map] prefers it (``keep_derived``: whenever its
+       orientation agreement is within ``orientation_slack``).  On the 9 FAUST / FAUST_5k
        pairs of docs/results/segmentation.md ("Without landmarks") this is as accurate as 5 true
        landmarks.
     4. **The turn check** (``turn_check``): two human shapes can also be matched turned front
@@ -149,6 +151,17 @@ class MapEstimator(eqx.Module):
     - `derived_landmarks`: landmark pairs of phase 3 (20; 0: no phase 3).  SMPL-part accuracy
       of the pull-back on the 9 pairs: 92.57 % with none, 94.40 % with 10, 94.47 % with 20
       (94.46 % with 5 true landmarks).
+    - `keep_derived`: phase 3 keeps the estimate with the derived landmarks whenever its
+      orientation agreement is within ``orientation_slack`` of the best, not by distortion;
+      where that changed phase 3's pick and phase 4 is then doubtful (``turn_doubtful``),
+      phases 3 and 4 run again without it (``False``; on where a shape is a point cloud,
+      `for_point_clouds`: the distortion on a noisy cloud's stand-in surface kept the start's
+      map on 4 of 12 noisy FAUST clouds where the derived one labelled 0.4–11 points better;
+      11 → 12 of 12 within 4 points of the clean pairs, docs/results/scans.md).
+    - `added_landmarks`: with given landmarks and the meshes, this many pairs read off phase
+      1's map (as phase 3 reads them) join them for a second estimate, kept
+      (``MapEstimate.landmarks``: the pairs read; 0, the default; 40 on clouds,
+      `for_point_clouds`: docs/results/scans.md).
     - `turn_check`: run phase 4 (``True``).
     - `turn_landmarks`: landmark pairs moved by the mirror symmetry in phase 4 (5: the
       source's farthest points, the tips of the limbs, where a turn swaps left and right).
@@ -185,6 +198,8 @@ class MapEstimator(eqx.Module):
     choice_coverage: bool = eqx.field(static=True, default=False)
     distortion_samples: int = eqx.field(static=True, default=DISTORTION_SAMPLES)
     derived_landmarks: int = eqx.field(static=True, default=20)
+    keep_derived: bool = eqx.field(static=True, default=False)
+    added_landmarks: int = eqx.field(static=True, default=0)
     turn_check: bool = eqx.field(static=True, default=True)
     turn_landmarks: int = eqx.field(static=True, default=5)
     turn_candidates: str = eqx.field(static=True, default="limbs")
@@ -205,9 +220,12 @@ class MapEstimator(eqx.Module):
         if self.turn_step is not None:
             check_int(self.turn_step, "turn_step", 1)
         check_int(self.derived_landmarks, "derived_landmarks", 0)
+        check_int(self.added_landmarks, "added_landmarks", 0)
         if not isinstance(self.derived_guidance, (bool, np.bool_)):
             raise BSFError(f"derived_guidance must be True or False, got "
                            f"{self.derived_guidance!r}")
+        if not isinstance(self.keep_derived, (bool, np.bool_)):
+            raise BSFError(f"keep_derived must be True or False, got {self.keep_derived!r}")
         if not isinstance(self.turn_check, (bool, np.bool_)):
             raise BSFError(f"turn_check must be True or False, got {self.turn_check!r}")
         check_real(self.wks_variance, "wks_variance", positive=True)
@@ -249,9 +267,9 @@ class MapEstimator(eqx.Module):
           turn check, when at hand (``transfer_collection`` computes it once for all its
           targets); default: computed here.
         - `resume`: an estimate of the same shapes from several starts by an estimator that
-          differs from this one at most in ``derived_guidance``, ``derived_landmarks`` and the
-          turn check: its kept start (phases 1 and 2) is taken as is, the call goes on from
-          phase 3.  Ignored with landmarks, a single start, or proxies (a large mesh).
+          differs from this one at most in ``derived_guidance``, ``derived_landmarks``,
+          ``keep_derived`` and the turn check: its kept start (phases 1 and 2) is taken as
+          is, the call goes on from phase 3.  Ignored with landmarks, a single start, or proxies (a large mesh).
 
         **Returns:**
 
@@ -295,18 +313,21 @@ class MapEstimator(eqx.Module):
                      max(k0 for k0, _ in starts + (single,)), masses, guided_to)
         choice = None
         if len(starts) > 1:  # (phases 1 and 2, or the kept start of an earlier call)
-            key = choice_key(self, starts, refine_to, source, target)
+            key = choice_key(self, starts, refine_to, source, target,
+                             (pb.source_mesh, pb.target_mesh))
             run, quality = (resumed_choice(resume, key) if resume is not None else
                             self._choose_start(pb, starts, [
                                 self._estimate(pb, s, lm, guide=self.landmark_guidance)
                                 for s in starts]))
             choice = (key, run, dict(quality))
-            if self.derived_landmarks:
-                run, quality = self._second_estimate(pb, run, quality)
-            if self.turn_check:
-                run, quality = self._check_turn(pb, run, quality, source_given, source_symmetry)
+            run, quality = self._later_phases(pb, run, quality, source_given, source_symmetry,
+                                              self.keep_derived)
         else:
             run, quality = self._estimate(pb, starts[0], lm, guide=self.landmark_guidance), {}
+            if lm is not None and self.added_landmarks and pb.meshes:  # (again, with more)
+                both, read = with_read_pairs(lm, pb.source_mesh, run.p2p, self.added_landmarks)
+                run = self._estimate(pb, starts[0], both, guide=self.landmark_guidance)
+                quality = dict(landmarks=read)
         return self._result(pb, run, am, an, quality)._replace(choice=choice)
 
     @on_one_blas_thread
@@ -424,20 +445,24 @@ class MapEstimator(eqx.Module):
         return [(pairs, self._estimate(pb, self._single_start(), pairs, guide=g))
                 for g in guides]
 
-    def _second_estimate(self, pb: Problem, run: Run, quality: dict) -> tuple:
-        """Phase 3: the estimates with landmarks read off the kept map, one kept if
-        preferred."""
-        found = self._derived(pb, run.p2p)
-        runs = [run] + [r for _, r in found]
-        maps = np.stack([r.p2p for r in runs[1:]])
-        dist = [quality["distortion"], *map(float, self._distortion(pb, maps))]
-        orient = [quality["orientation"],
-                  *map(float, _agreements(pb.source_mesh, pb.target_mesh, maps, pb.faces))]
-        pick = choose_map(dist, orient, slack=self.orientation_slack)
-        if pick == 0:
-            return run, quality
-        return runs[pick], dict(quality, landmarks=found[pick - 1][0], distortion=dist[pick],
-                                orientation=orient[pick])
+    def _later_phases(self, pb: Problem, run: Run, quality: dict, source_given: Spectrum,
+                      source_symmetry, trust: bool) -> tuple:
+        """Phases 3 and 4 from the kept start's run; with ``trust`` (``keep_derived``) again
+        without it where it changed phase 3's pick and the turn check was doubtful."""
+        first, trusted = (run, quality), False
+        if self.derived_landmarks:
+            found = self._derived(pb, run.p2p)
+            maps = np.stack([r.p2p for _, r in found])
+            dist = [quality["distortion"], *map(float, self._distortion(pb, maps))]
+            orient = [quality["orientation"], *map(float, _agreements(
+                pb.source_mesh, pb.target_mesh, maps, pb.faces))]
+            run, quality, trusted = choose_derived(self, run, quality, found, dist, orient,
+                                                   trust)
+        if self.turn_check:
+            run, quality = self._check_turn(pb, run, quality, source_given, source_symmetry)
+            if trusted and quality.get("turn_doubtful"):  # (the distortion's pick instead)
+                return self._later_phases(pb, *first, source_given, source_symmetry, False)
+        return run, quality
 
     def _check_turn(self, pb: Problem, run: Run, quality: dict, source_given: Spectrum,
                     source_symmetry) -> tuple:
@@ -448,30 +473,9 @@ class MapEstimator(eqx.Module):
                                        source_symmetry)  # (not swapped: the run as it came)
             return self._grow_again(pb, turned, q) if q.get("swapped") else (run, dict(
                 q, distortion=quality["distortion"], orientation=quality["orientation"]))
-        x, y = landmarks_from_map(pb.source_mesh, run.p2p, self.turn_landmarks)
-        if source_symmetry is not None:
-            sx = source_symmetry[x]
-        else:  # the mirror images of x only (a search of len(x) rows, not of every vertex)
-            at_size = dataclasses.replace(
-                self, refine_to=turn_mirror_size(self, pb.refine_to, pb.guided_to))
-            sx = at_size.mirror_symmetry(
-                source_given, pb.source_mesh,
-                samples=None if pb.samples is None else pb.samples[0], rows=x)
         joint = self.turn_candidates == "limbs"
-        sets = (turn_landmark_sets(pb.source_mesh, x, sx, y, self.turn_radius) if joint
-                else [(sx, y)])
-        runs, kept_sets, turn = [run], [quality.get("landmarks")], []
-        for n, lms in enumerate(sets):
-            alt = self._estimate(pb, self._single_start(), lms, orient=True)
-            if joint or not self.derived_landmarks:  # ("limbs": both estimates compete)
-                runs.append(alt)
-                kept_sets.append(lms)
-                turn += [len(runs) - 1] if n == 0 else []
-            if self.derived_landmarks:
-                for derived, alt in self._derived(pb, alt.p2p):
-                    runs.append(alt)
-                    kept_sets.append(derived)
-                    turn += [len(runs) - 1] if n == 0 else []
+        runs, kept_sets, turn = turn_candidates(self, pb, run, quality, source_given,
+                                                source_symmetry, joint)
         quality = dict(quality, swapped=False)
         choice = turn_choice(self, pb, runs, joint, turn)
         if choice is None:  # (a target too coarse for the local distortion keeps the map)

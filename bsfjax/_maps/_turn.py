@@ -8,6 +8,8 @@ methods ([`MapEstimator.mirror_symmetry`][bsfjax.MapEstimator.mirror_symmetry]) 
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
@@ -17,6 +19,7 @@ from ._distortion import _agreements, _distortions, choose_map
 from ._estimate import turn_step
 from ._estimation import FmapWeights, estimate_fmap
 from ._fmap import fmap_to_p2p, zoomout
+from ._guide import turn_mirror_size
 from ._orientation import orientation_bases
 from .._sampling import farthest_point_sampling
 from .._spectral import Spectrum
@@ -144,6 +147,15 @@ def landmarks_from_map(source_mesh, p2p, n: int) -> tuple[np.ndarray, np.ndarray
     return src, known[first[cKDTree(v[images]).query(v[src])[1]]].astype(np.int64)
 
 
+def with_read_pairs(landmarks, source_mesh, p2p, n: int) -> tuple:
+    """``(joined, read)``: ``n`` landmark pairs read off ``p2p`` (`landmarks_from_map`) and
+    the given ``landmarks`` followed by them, the pairs of the second estimate of
+    ``MapEstimator.added_landmarks`` (`transfer_collection` reads them the same way)."""
+    read = landmarks_from_map(source_mesh, p2p, n)
+    return tuple(np.concatenate([np.asarray(a, np.int64), b])
+                 for a, b in zip(landmarks, read)), read
+
+
 def descriptors(spectrum: Spectrum, n_energies: int, k0: int, variance: float, landmarks):
     """A shape's descriptors for [`estimate_fmap`][bsfjax.estimate_fmap]: WKS, and WKS centred at
     ``landmarks`` (if any) beside them.  The parts are freed once joined: on a large shape with
@@ -164,6 +176,38 @@ def check_sizes(k, refine_to, km: int, name: str = "refine_to") -> int:
     if not isinstance(refine_to, (int, np.integer)) or not k <= refine_to <= km:
         raise BSFError(f"{name} must be an integer in [{k}, {km}], got {refine_to!r}")
     return refine_to
+
+
+def turn_candidates(est, pb, run, quality: dict, source_given: Spectrum, source_symmetry,
+                    joint: bool) -> tuple:
+    """The maps the turn check of ``est`` compares, ``(runs, landmark_sets, turn)``: the kept
+    ``run`` first, then the estimates with the mirrored landmark pairs (and with the pairs
+    read off them); ``turn`` the indices of the whole turn's.  ``joint``: one set per limb
+    too (``turn_candidates="limbs"``), each estimate competing beside its derived one."""
+    x, y = landmarks_from_map(pb.source_mesh, run.p2p, est.turn_landmarks)
+    if source_symmetry is not None:
+        sx = source_symmetry[x]
+    else:  # the mirror images of x only (a search of len(x) rows, not of every vertex)
+        at_size = dataclasses.replace(
+            est, refine_to=turn_mirror_size(est, pb.refine_to, pb.guided_to))
+        sx = at_size.mirror_symmetry(
+            source_given, pb.source_mesh,
+            samples=None if pb.samples is None else pb.samples[0], rows=x)
+    sets = (turn_landmark_sets(pb.source_mesh, x, sx, y, est.turn_radius) if joint
+            else [(sx, y)])
+    runs, kept_sets, turn = [run], [quality.get("landmarks")], []
+    for n, lms in enumerate(sets):
+        alt = est._estimate(pb, est._single_start(), lms, orient=True)
+        if joint or not est.derived_landmarks:  # ("limbs": both estimates compete)
+            runs.append(alt)
+            kept_sets.append(lms)
+            turn += [len(runs) - 1] if n == 0 else []
+        if est.derived_landmarks:
+            for derived, alt in est._derived(pb, alt.p2p):
+                runs.append(alt)
+                kept_sets.append(derived)
+                turn += [len(runs) - 1] if n == 0 else []
+    return runs, kept_sets, turn
 
 
 def turn_choice(est, pb, runs: list, joint: bool, turn: list):

@@ -54,7 +54,7 @@ from .._maps import face_geometry
 from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
 from .._maps import (MapEstimate, MapEstimator, check_starts, estimate_size, estimates_again,
-                     for_point_clouds, guidable, landmark_geodesics)
+                     for_point_clouds, guidable, landmark_geodesics, with_read_pairs)
 from ._face_labels import decide_face_labels, face_label_shares
 from ._collection_rows import (SourceSymmetry, TargetTransfer, body_result, collection_estimator,
                                file_row_results, landmark_lookup, missing_parts, on_body,
@@ -345,6 +345,11 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             mesh = surface_for_map(mesh)
         _, am, scaled, an = unit_area_pair(src_spec, spec)  # at the source's unit area
         sub = None if zoomout_samples is None else subsample(mesh, zoomout_samples)
+        if lm is not None and this.added_landmarks:  # (a cloud: more pairs, read off a map)
+            first = dataclasses.replace(this, added_landmarks=0)(
+                src_spec, spec, lm, source_mesh=src_geometry, target_mesh=mesh,
+                samples=None if sub is None else (sub_m, sub))
+            lm = with_read_pairs(lm, src_geometry, first.p2p, this.added_landmarks)[0]
         est = None
         if lm is None and not one_start:  # the choice among starts: the estimator's own map
             est = this(src_spec, spec, source_mesh=src_geometry, target_mesh=mesh,
