@@ -269,7 +269,8 @@ class MapEstimator(eqx.Module):
         - `resume`: an estimate of the same shapes from several starts by an estimator that
           differs from this one at most in ``derived_guidance``, ``derived_landmarks``,
           ``keep_derived`` and the turn check: its kept start (phases 1 and 2) is taken as
-          is, the call goes on from phase 3.  Ignored with landmarks, a single start, or proxies (a large mesh).
+          is, the call goes on from phase 3.  Ignored with landmarks, a single start, or
+          proxies (a large mesh).
 
         **Returns:**
 
@@ -320,8 +321,7 @@ class MapEstimator(eqx.Module):
                                 self._estimate(pb, s, lm, guide=self.landmark_guidance)
                                 for s in starts]))
             choice = (key, run, dict(quality))
-            run, quality = self._later_phases(pb, run, quality, source_given, source_symmetry,
-                                              self.keep_derived)
+            run, quality = self._later_phases(pb, run, quality, source_given, source_symmetry)
         else:
             run, quality = self._estimate(pb, starts[0], lm, guide=self.landmark_guidance), {}
             if lm is not None and self.added_landmarks and pb.meshes:  # (again, with more)
@@ -446,23 +446,24 @@ class MapEstimator(eqx.Module):
                 for g in guides]
 
     def _later_phases(self, pb: Problem, run: Run, quality: dict, source_given: Spectrum,
-                      source_symmetry, trust: bool) -> tuple:
-        """Phases 3 and 4 from the kept start's run; with ``trust`` (``keep_derived``) again
-        without it where it changed phase 3's pick and the turn check was doubtful."""
-        first, trusted = (run, quality), False
+                      source_symmetry) -> tuple:
+        """Phases 3 and 4 from the kept start's run; with ``keep_derived``, phase 3's choice
+        once more without it (the same derived estimates) where it changed the pick and the
+        turn check was doubtful."""
         if self.derived_landmarks:
             found = self._derived(pb, run.p2p)
             maps = np.stack([r.p2p for _, r in found])
             dist = [quality["distortion"], *map(float, self._distortion(pb, maps))]
             orient = [quality["orientation"], *map(float, _agreements(
                 pb.source_mesh, pb.target_mesh, maps, pb.faces))]
-            run, quality, trusted = choose_derived(self, run, quality, found, dist, orient,
-                                                   trust)
-        if self.turn_check:
-            run, quality = self._check_turn(pb, run, quality, source_given, source_symmetry)
-            if trusted and quality.get("turn_doubtful"):  # (the distortion's pick instead)
-                return self._later_phases(pb, *first, source_given, source_symmetry, False)
-        return run, quality
+        for trust in dict.fromkeys((self.keep_derived, False)):
+            kept, q, trusted = (choose_derived(self, run, quality, found, dist, orient, trust)
+                                if self.derived_landmarks else (run, quality, False))
+            if self.turn_check:
+                kept, q = self._check_turn(pb, kept, q, source_given, source_symmetry)
+                if trusted and q.get("turn_doubtful"):  # (the distortion's pick instead)
+                    continue
+            return kept, q
 
     def _check_turn(self, pb: Problem, run: Run, quality: dict, source_given: Spectrum,
                     source_symmetry) -> tuple:
