@@ -10,6 +10,7 @@ from bsfjax._maps._fmap import _from_p2p, _size_schedule, _zoomout_jit
 from bsfjax._maps._guide import (CLOUD_ADDED_LANDMARKS, CLOUD_ZOOMOUT_STEP, estimates_again, for_point_clouds,
                                  guided_search)
 from bsfjax.internal import estimate_size, guided_zoomout, landmark_geodesics, vertex_areas
+from bsfjax._maps._turn import LIMB_APART
 
 from .conftest import data_path
 
@@ -155,6 +156,7 @@ def test_clouds_run_unguided_with_a_larger_zoomout_step_the_coverage_and_the_der
     assert on_cloud.choice_coverage and not est.choice_coverage
     assert on_cloud.keep_derived and not est.keep_derived
     assert on_cloud.added_landmarks == CLOUD_ADDED_LANDMARKS > est.added_landmarks == 0
+    assert on_cloud.turn_limbs_apart is None and est.turn_limbs_apart == LIMB_APART
     assert for_point_clouds(est, cloud, sphere_mesh).k == est.k
     # a step the user made larger stays theirs
     assert for_point_clouds(bj.MapEstimator(zoomout_step=10), cloud).zoomout_step == 10

@@ -26,7 +26,8 @@ def _mirror(levels: int) -> np.ndarray:
 def test_turn_landmark_sets_closed_form(small_pair):
     """The whole turn first; then each limb landmark mirrored with the landmarks near its
     mirror image (the two hands together), the head (its own mirror image) never alone, and
-    no set twice or equal to the whole turn."""
+    no set twice or equal to the whole turn; the same sets on an isometric pose with the
+    hands together (the distances are geodesic)."""
     pair, _, _ = small_pair
     S = _mirror(2)
     src = pair.source
@@ -52,6 +53,21 @@ def test_turn_landmark_sets_closed_form(small_pair):
     assert len(turn_landmark_sets(src, x[:3], S[x[:3]], y[:3], radius)) == 1
     for lms, t in sets + four:
         np.testing.assert_array_equal(t, y[:len(t)])
+    # the arms folded, the hands meeting at the mirror plane: nearly an isometry, so the
+    # same sets (the Euclidean test took the hands for their own mirror images and lost them)
+    folded = v.astype(np.float64).copy()
+    a = 0.5 * np.abs(v[x[1:3], 0]).min()
+    far = np.abs(folded[:, 0]) > a
+    folded[far, 0] = np.sign(folded[far, 0]) * (2 * a - np.abs(folded[far, 0]))
+    assert np.linalg.norm(folded[x[1]] - folded[x[2]]) < radius * np.sqrt(src.area)
+    bent = bsfjax.Mesh(folded, np.asarray(src.faces))
+    np.testing.assert_allclose(bent.area, src.area, rtol=0.01)  # (bar the fold's triangles)
+    for got, want in zip(turn_landmark_sets(bent, x, S[x], y, radius), sets, strict=True):
+        np.testing.assert_array_equal(got[0], want[0])
+    # in space alone (apart=None, as on clouds) the folded hands are taken for their own
+    # mirror images, and the feet, the only limbs left, mirrored are the whole turn: no set
+    assert len(turn_landmark_sets(bent, x, S[x], y, radius, apart=None)) == 1
+    assert len(turn_landmark_sets(src, x, S[x], y, radius, apart=None)) == 3  # (unfolded)
 
 
 def test_measures_disagree_with_limb_alternatives():

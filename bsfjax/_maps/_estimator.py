@@ -21,8 +21,8 @@ from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable
 from ._proxy import needs_proxy, proxy_estimate
-from ._turn import check_sizes, descriptors, landmarks_from_map, selection_rows, self_map, \
-    turn_candidates, turn_choice, with_read_pairs
+from ._turn import LIMB_APART, check_sizes, descriptors, landmarks_from_map, selection_rows, \
+    self_map, turn_candidates, turn_choice, with_read_pairs
 from .._sampling import Subsample, subsample
 from .._spectral import Spectrum, unit_area_pair
 from .._util import (BSFError, check_int, check_real, check_source_mesh, on_one_blas_thread,
@@ -75,8 +75,9 @@ class MapEstimator(eqx.Module):
        kept map, estimates with ``(S x, y)`` and the orientation term, then once more with
        ``derived_landmarks`` pairs read off that map (the whole turn).  With
        ``turn_candidates="limbs"`` a single swapped pair of limbs (noisy shins) is checked
-       too: each landmark farther than ``turn_radius`` from its mirror image gives the
-       alternative ``(x, y)`` with that ``xᵢ`` alone replaced by ``S xᵢ``.  Among the maps
+       too: each landmark farther than ``turn_radius`` from its mirror image (or than
+       ``turn_limbs_apart`` radii along the surface) gives the alternative ``(x, y)`` with
+       that ``xᵢ`` replaced by ``S xᵢ``.  Among the maps
        within ``orientation_slack`` of the best orientation agreement, the one of least local
        distortion (pairs of ``turn_samples`` target samples closer than ``turn_radius``: a
        twisted limb raises it) times global distortion (a limb torn off its side) is kept
@@ -143,7 +144,7 @@ class MapEstimator(eqx.Module):
       unguided estimate, and the choice keeps one (``False``; ``bsfjax transfer
       --partial``).  For a target that misses parts (a cut limb) and has no landmarks: on
       the partial FAUST targets of docs/results/scans.md the labels came within 0.5–2.9
-      points of the clean pairs on 8 of 9 (before: 84.2 % on average, 7–62 points lost on
+      points of the clean pairs on 9 of 9 (before: 84.2 % on average, 7–62 points lost on
       the first cut).  Off by default: on clean pairs the choice sometimes keeps the guided
       estimate where it is less accurate (its distortion and orientation both better): the
       9 pairs of docs/results/segmentation.md without landmarks 95.04 → 94.66 %, FAUST_5k
@@ -170,6 +171,8 @@ class MapEstimator(eqx.Module):
       ``"mirror"`` (the whole turn, by local distortion: the earlier check) (``"limbs"``).
     - `turn_samples`, `turn_radius`: the local distortion of phase 4, on this many target
       samples (200), over their pairs closer than this (0.15, at unit area).
+    - `turn_limbs_apart`: a landmark this many ``turn_radius`` from its mirror image along the
+      surface is a limb even near it in space (``LIMB_APART``; ``None`` on clouds: in space).
     - `selection_vertices`, `selection_faces`: above this many target vertices (20000) the
       candidates are compared at the corners of this many random faces (4096: the
       orientation agreement's standard error below 0.01) and the distortions' samples
@@ -209,6 +212,7 @@ class MapEstimator(eqx.Module):
     derived_guidance: bool = eqx.field(static=True, default=False)
     turn_samples: int = eqx.field(static=True, default=200)
     turn_radius: float = eqx.field(static=True, default=0.15)
+    turn_limbs_apart: float | None = eqx.field(static=True, default=LIMB_APART)
     selection_vertices: int = eqx.field(static=True, default=20000)
     selection_faces: int = eqx.field(static=True, default=4096)
     proxy_above: int | None = eqx.field(static=True, default=20000)
@@ -221,13 +225,9 @@ class MapEstimator(eqx.Module):
             check_int(self.turn_step, "turn_step", 1)
         check_int(self.derived_landmarks, "derived_landmarks", 0)
         check_int(self.added_landmarks, "added_landmarks", 0)
-        if not isinstance(self.derived_guidance, (bool, np.bool_)):
-            raise BSFError(f"derived_guidance must be True or False, got "
-                           f"{self.derived_guidance!r}")
-        if not isinstance(self.keep_derived, (bool, np.bool_)):
-            raise BSFError(f"keep_derived must be True or False, got {self.keep_derived!r}")
-        if not isinstance(self.turn_check, (bool, np.bool_)):
-            raise BSFError(f"turn_check must be True or False, got {self.turn_check!r}")
+        for flag in ("derived_guidance", "keep_derived", "turn_check"):
+            if not isinstance(getattr(self, flag), (bool, np.bool_)):
+                raise BSFError(f"{flag} must be True or False, got {getattr(self, flag)!r}")
         check_real(self.wks_variance, "wks_variance", positive=True)
         check_real(self.orient_weight, "orient_weight", positive=True)
         if not 0 <= check_real(self.orientation_slack, "orientation_slack") <= 1:
@@ -238,10 +238,11 @@ class MapEstimator(eqx.Module):
             raise BSFError(f"turn_candidates must be 'limbs' or 'mirror', got {self.turn_candidates!r}")
         check_int(self.turn_samples, "turn_samples", 2)
         check_real(self.turn_radius, "turn_radius", positive=True)
+        if self.turn_limbs_apart is not None:
+            check_real(self.turn_limbs_apart, "turn_limbs_apart", positive=True)
         check_int(self.selection_vertices, "selection_vertices", 0)
         check_int(self.selection_faces, "selection_faces", 1)
-        if self.proxy_above is not None:
-            check_int(self.proxy_above, "proxy_above", 0)
+        check_int(0 if self.proxy_above is None else self.proxy_above, "proxy_above", 0)
         check_int(self.proxy_vertices, "proxy_vertices", 4)
         if check_real(self.landmark_guidance, "landmark_guidance") < 0:
             raise BSFError(f"landmark_guidance must be >= 0, got {self.landmark_guidance!r}")
@@ -264,8 +265,7 @@ class MapEstimator(eqx.Module):
         - `samples`: ``(source, target)`` [`Subsample`][bsfjax.Subsample] s for ZoomOut, when at
           hand (instead of ``zoomout_samples`` new ones).
         - `source_symmetry`: the source's [`mirror_symmetry`][bsfjax.mirror_symmetry] for the
-          turn check, when at hand (``transfer_collection`` computes it once for all its
-          targets); default: computed here.
+          turn check, when at hand (``transfer_collection``'s, once for all its targets).
         - `resume`: an estimate of the same shapes from several starts by an estimator that
           differs from this one at most in ``derived_guidance``, ``derived_landmarks``,
           ``keep_derived`` and the turn check: its kept start (phases 1 and 2) is taken as

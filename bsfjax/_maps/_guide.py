@@ -107,7 +107,10 @@ def for_point_clouds(estimator, *shapes):
     turn check at the given step: ``turn_step``), ``added_landmarks`` at least
     `CLOUD_ADDED_LANDMARKS`, ``choice_coverage`` and ``keep_derived`` on
     (the distortion on a noisy cloud's stand-in surface does not tell the starts apart,
-    `bsfjax._maps._coverage`, nor the start's map from the one with landmarks read off it).
+    `bsfjax._maps._coverage`, nor the start's map from the one with landmarks read off it),
+    and the turn check's limbs told in space alone (``turn_limbs_apart=None``: each set more
+    is one more chance for those noisy measures to err; with the limbs told along the
+    surface a noisy 15K cloud of FAUST 001→011 turned, 93.5 → 87.5 % without landmarks).
 
     Unguided: its landmark-free estimates run on stand-in surfaces (`surface_for_map`) whose
     Dijkstra distances the noise lengthens unevenly; guided by the landmarks read off a map
@@ -118,7 +121,8 @@ def for_point_clouds(estimator, *shapes):
             estimator, landmark_guidance=0.0,
             zoomout_step=max(estimator.zoomout_step, CLOUD_ZOOMOUT_STEP),
             turn_step=turn_step(estimator), choice_coverage=True, keep_derived=True,
-            added_landmarks=max(estimator.added_landmarks, CLOUD_ADDED_LANDMARKS))
+            added_landmarks=max(estimator.added_landmarks, CLOUD_ADDED_LANDMARKS),
+            turn_limbs_apart=None)
     return estimator
 
 
