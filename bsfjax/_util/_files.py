@@ -168,7 +168,7 @@ def remove_live_temps() -> None:
     for p in list(LIVE_TEMPS):
         try:
             p.unlink(missing_ok=True)
-        except OSError:
+        except OSError:  # (on the way out: the other temporaries are still removed)
             pass
     LIVE_TEMPS.clear()
 

@@ -40,10 +40,10 @@ def _on_sigint(signum, frame) -> None:  # pragma: no cover - runs in a subproces
             files.remove_live_temps()
         sys.stdout.flush()
     except BaseException:  # a closed pipe must not stop the exit
-        pass
+        pass  # (best effort: the process ends on the next lines whatever happened here)
     try:
         os.write(2, b"bsfjax: interrupted\n")
-    except OSError:
+    except OSError:  # stderr closed: the exit status alone says it was interrupted
         pass
     os._exit(EXIT_INTERRUPTED)
 
@@ -56,7 +56,7 @@ def exit_now(status: int) -> None:  # pragma: no cover - ends the process
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
-        except BaseException:
+        except BaseException:  # a closed pipe: the outputs are committed, the exit goes on
             pass
     os._exit(int(status))
 
