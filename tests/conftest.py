@@ -75,6 +75,16 @@ def pytest_unconfigure(config):
         shutil.rmtree(folder, ignore_errors=True)
 
 
+def cpu_devices_env(n: int) -> dict[str, str]:
+    """The environment for a subprocess with ``n`` CPU devices: this run's own ``XLA_FLAGS``
+    (``pytest_configure``'s) kept, so that its results compare bit for bit with this
+    process's."""
+    import os
+
+    return dict(os.environ, JAX_PLATFORMS="cpu", XLA_FLAGS=os.environ.get("XLA_FLAGS", "")
+                + f" --xla_force_host_platform_device_count={n}")
+
+
 def data_path(*parts: str) -> Path:
     """Path of a file in the shared data folder, or skip the test with the reason."""
     p = DATA.joinpath(*parts)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import socket
 import subprocess
 import sys
@@ -14,6 +13,8 @@ import pytest
 import bsfjax
 from bsfjax import REGIMES
 from bsfjax.cli import main
+
+from .conftest import cpu_devices_env
 
 
 @pytest.fixture(scope="module")
@@ -111,9 +112,7 @@ def test_two_processes_write_what_one_process_writes(files, one_process):
     and process 1 one; the files are those of the one-process run, bit for bit."""
     out = files / "two"
     port = _free_port()
-    env = dict(os.environ, JAX_PLATFORMS="cpu",
-               XLA_FLAGS=os.environ.get("XLA_FLAGS", "")  # (conftest's flags kept)
-               + " --xla_force_host_platform_device_count=2")
+    env = cpu_devices_env(2)
     procs = [subprocess.Popen([sys.executable, "-m", "bsfjax.cli",
                                *_argv(files, out, files / "tg", files / "src.ply"),
                                "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",

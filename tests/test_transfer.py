@@ -16,7 +16,7 @@ import bsfjax
 from bsfjax import Mesh
 from bsfjax import stack_spectra, transfer_pairs
 
-from .conftest import icosphere
+from .conftest import cpu_devices_env, icosphere
 
 
 def _pairs(n_pairs=3, k=20, seed=0):
@@ -154,8 +154,7 @@ def test_four_cpu_devices_give_identical_results(pairs, tmp_path):
     area = transfer_pairs("omp", _stack(src, tgt, C, centers), F, sparsity=6)
     path = tmp_path / "sharded.npz"
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = dict(os.environ, JAX_PLATFORMS="cpu", XLA_FLAGS=os.environ.get("XLA_FLAGS", "")
-               + " --xla_force_host_platform_device_count=4")  # (conftest's flags kept)
+    env = cpu_devices_env(4)
     r = subprocess.run([sys.executable, "-c", SHARDED.format(root=root, path=str(path))], env=env,
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
