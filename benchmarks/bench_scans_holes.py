@@ -214,6 +214,9 @@ def main():
     ap.add_argument("--radius", type=float, default=RADIUS,
                     help=f"hole radius, a fraction of the height (default {RADIUS})")
     ap.add_argument("--no-partial", action="store_true", help="skip the partial targets")
+    ap.add_argument("--cut", type=int, default=0, choices=range(len(PARTIAL_CUTS)),
+                    help="the partial target's cut, PARTIAL_CUTS[CUT] (default 0; "
+                         "bench_scans.py --draw D takes D mod 3)")
     ap.add_argument("--landmarks-only", action="store_true", help="skip the landmark-free runs")
     ap.add_argument("--pyfm", action="store_true", help="also pyFM's pipeline (pyfmaps)")
     args = ap.parse_args()
@@ -222,7 +225,7 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         rows = run(h.Path(args.data), h.Path(tmp), pairs, h.int_list(args.holes),
                    h.int_list(args.seeds), not args.no_partial, not args.landmarks_only,
-                   args.pyfm, args.radius)
+                   args.pyfm, args.radius, args.cut)
     text = table(rows)
     note = (f"\n{h.short_machine()}; truth: the SMPL parts of the kept vertices; areas of the "
             "holed / partial target as written; Δ: points from the clean pair.\n")

@@ -364,10 +364,10 @@ def test_host_work_overlaps_the_stages_on_one_blas_thread(monkeypatch):
 
 
 def test_a_target_missing_parts_is_estimated_again(collection, monkeypatch):
-    """Without landmarks, a target whose labels miss source parts has its map estimated again
-    with ``derived_guidance`` (as ``bsfjax transfer``), and that result is the one yielded:
-    equal to the collection run with such an estimator from the start; a target with
-    landmarks, or ``estimate_again=False``, is estimated once."""
+    """A target whose labels miss source parts has its map estimated again with
+    ``derived_guidance`` (as ``bsfjax transfer``; with landmarks: phases 3 and 4 after their
+    map), and that result is the one yielded: equal to the collection run with such an
+    estimator from the start; with ``estimate_again=False`` it is estimated once."""
     import bsfjax._pipeline._collection as col
     small, targets, lm, _ = collection
     used = []
@@ -387,17 +387,18 @@ def test_a_target_missing_parts_is_estimated_again(collection, monkeypatch):
     monkeypatch.setattr(bsfjax.MapEstimator, "_choose_start",
                         lambda self, *a: chosen.append(1) or real_choose(self, *a))
     got = dict(transfer_collection(small.source, small.labels, targets, **kw))
-    assert used == [False, False, True]  # (target 1 has landmarks: once)
-    assert len(chosen) == 1
-    assert got[0].estimated_again and not got[1].estimated_again
+    assert used == [False, False, True, True]  # (target 1 with its landmarks too)
+    assert len(chosen) == 1  # (target 0's: with landmarks there is no choice among starts)
+    assert got[0].estimated_again and got[1].estimated_again
     used.clear()
     partial = bsfjax.MapEstimator(zoomout_samples=300, derived_guidance=True)
-    direct = dict(transfer_collection(small.source, small.labels, targets[:1], method="refined",
-                                      k=10, estimator=partial))[0]
-    assert used == [True] and not direct.estimated_again
-    np.testing.assert_array_equal(got[0].p2p, direct.p2p)
-    np.testing.assert_array_equal(got[0].labels, direct.labels)
-    assert got[0].seconds > direct.seconds * 0.5  # (both estimates counted)
+    direct = dict(transfer_collection(small.source, small.labels, targets, method="refined",
+                                      k=10, estimator=partial, landmarks=lambda i: lm.get(i)))
+    assert used == [True, True] and not direct[0].estimated_again
+    for i in range(2):
+        np.testing.assert_array_equal(got[i].p2p, direct[i].p2p)
+        np.testing.assert_array_equal(got[i].labels, direct[i].labels)
+    assert got[0].seconds > direct[0].seconds * 0.5  # (both estimates counted)
     used.clear()
     once = dict(transfer_collection(small.source, small.labels, targets[:1], **kw,
                                     estimate_again=False))[0]

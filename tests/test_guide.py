@@ -163,13 +163,20 @@ def test_clouds_run_unguided_with_a_larger_zoomout_step_the_coverage_and_the_der
 
 
 def test_a_second_estimate_only_where_it_can_differ(sphere_mesh):
-    """``estimates_again`` (the rule ``bsfjax transfer`` and `transfer_collection` share): a
-    landmark-free estimate from several starts between triangle meshes, with
-    ``derived_guidance`` off and the guidance on.  A single start never reaches the phases
-    that the derived pairs guide, so ``--one-start`` would pay for the same map twice."""
+    """``estimates_again`` (the rule ``bsfjax transfer`` and `transfer_collection` share):
+    between triangle meshes, with ``derived_guidance`` off and the guidance on, an estimate
+    with landmarks (phases 3 and 4 then follow phase 1) or a landmark-free one from several
+    starts.  A landmark-free single start never reaches the phases that the derived pairs
+    guide, so ``--one-start`` would pay for the same map twice."""
     est, m, cloud = bj.MapEstimator(), sphere_mesh, bj.PointCloud(np.asarray(sphere_mesh.vertices))
+    lm = ([0, 1], [0, 1])
     assert estimates_again(est, None, m, m, 60)
-    assert not estimates_again(est, ([0, 1], [0, 1]), m, m, 60)  # landmarks given
+    assert estimates_again(est, lm, m, m, 60)
+    assert estimates_again(est.__class__(starts=((30, 7.0),)), lm, m, m, 60)
+    for other in (est.__class__(derived_guidance=True), est.__class__(landmark_guidance=0.0),
+                  est.__class__(derived_landmarks=0, turn_check=False)):
+        assert not estimates_again(other, lm, m, m, 60)
+    assert not estimates_again(est, lm, m, cloud, 60)
     assert not estimates_again(est.__class__(derived_guidance=True), None, m, m, 60)
     assert not estimates_again(est.__class__(starts=((30, 7.0),)), None, m, m, 60)
     assert not estimates_again(est.__class__(landmark_guidance=0.0), None, m, m, 60)
@@ -180,6 +187,39 @@ def test_a_second_estimate_only_where_it_can_differ(sphere_mesh):
     # the starts that ZoomOut to refine_to keeps: all but one above it
     assert not estimates_again(est.__class__(starts=((10, 7.0), (50, 7.0))), None, m, m, 20)
     assert estimates_again(est.__class__(starts=((10, 7.0), (50, 7.0))), None, m, m, 60)
+
+
+def test_landmarks_and_derived_guidance_go_on_from_the_landmarks_map(small_pair,
+                                                                     monkeypatch):
+    """With landmarks, ``derived_guidance`` runs phases 3 and 4 from phase 1's map (the one
+    the landmarks give without it), measured, and returns the map they keep; without it the
+    landmarks' map is returned as it is."""
+    import dataclasses
+
+    ex, sm, sn = small_pair
+    lm = ([0, 100, 200, 300], [0, 100, 200, 300])  # (levels keep the coarse vertices first)
+    kw = dict(source_mesh=ex.source, target_mesh=ex.target)
+    seen = []
+    real = bj.MapEstimator._later_phases
+
+    def spy(self, pb, run, quality, *rest):
+        seen.append((run.p2p.copy(), dict(quality)))
+        seen.append(real(self, pb, run, quality, *rest))
+        return seen[-1]
+
+    monkeypatch.setattr(bj.MapEstimator, "_later_phases", spy)
+    est = bj.MapEstimator(k=10, refine_to=20, zoomout_samples=300)
+    plain = est(sm, sn, lm, **kw)
+    assert not seen and plain.distortion is None and plain.swapped is None
+    got = dataclasses.replace(est, derived_guidance=True)(sm, sn, lm, **kw)
+    (start, measured), (kept, quality) = seen
+    np.testing.assert_array_equal(start, plain.p2p)
+    distortion = bj.map_distortion(ex.source, ex.target, plain.p2p, fit_scale=True)
+    np.testing.assert_allclose(measured["distortion"], distortion, rtol=1e-6)
+    np.testing.assert_allclose(measured["orientation"],
+                               bj.orientation_agreement(ex.source, ex.target, plain.p2p))
+    np.testing.assert_array_equal(got.p2p, kept.p2p)
+    assert got.distortion == quality["distortion"] and got.swapped is not None
 
 
 def test_guided_to_is_checked(small_pair):

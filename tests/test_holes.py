@@ -12,6 +12,7 @@ import scipy.sparse as sp
 
 import bsfjax
 from bsfjax.cli import main
+from bsfjax._cli import _transfer as cli_transfer
 
 from .conftest import icosphere
 
@@ -211,9 +212,11 @@ def test_python_results_name_the_missing_part(partial_files):
 
 
 def test_collection_of_partial_targets_reports_and_keeps_the_file_rows(partial_files,
-                                                                       tmp_path):
+                                                                       tmp_path, capsys):
     """``--out-dir`` (transfer_collection): the filled target's patches are dropped from every
-    output and ``summary.json`` names the missing part."""
+    output and ``summary.json`` names the missing part.  With landmarks too, the target that
+    misses a part has its map estimated again (phases 3 and 4 after the landmarks' map), with
+    the labels of the one-target command."""
     d, pair, target, kept, arm = partial_files
     targets = tmp_path / "targets"
     targets.mkdir()
@@ -228,8 +231,18 @@ def test_collection_of_partial_targets_reports_and_keeps_the_file_rows(partial_f
     summary = json.loads((out / "summary.json").read_text())["targets"][0]
     assert summary["missing_parts"] == ["left_arm"]
     assert summary["filled_vertices"] > 0
-    assert summary["estimated_again"] is False  # (landmarks given: one estimate)
+    assert summary["estimated_again"] is True
     labels, names = bsfjax.load_labels(out / "partial.json")
     assert labels.shape == (target.n_vertices,)  # one row per file row
     ours = np.asarray([pair.label_names.index(n) for n in names])[labels]
     assert np.mean(ours == pair.labels[kept]) > 0.8
+    capsys.readouterr()
+    one = tmp_path / "one.json"
+    assert main(["transfer", str(d / "src.ply"), str(targets / "partial.off"), "--labels",
+                 str(d / "labels.json"), "--landmarks",
+                 f"{','.join(str(int(kept[r])) for r in rows)}:{','.join(map(str, rows))}",
+                 "--out", str(one), "-k", "20"]) == 0
+    assert cli_transfer.PARTIAL_AGAIN_LANDMARKS in capsys.readouterr().err
+    labels_one, names_one = bsfjax.load_labels(one)
+    assert names_one == names
+    np.testing.assert_array_equal(labels_one, labels)

@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 import bsfjax
 from bsfjax import MapEstimator
 from bsfjax._maps._estimate import Problem, Run
-from bsfjax._maps._turn import measures_disagree, turn_landmark_sets
+from bsfjax._maps._turn import check_turn, measures_disagree, turn_landmark_sets
 from bsfjax._spectral import unit_area_pair
 
 
@@ -93,7 +93,7 @@ def _turn_check(est, pair, sm, sn, p2p, symmetry):
     """Phase 4 of ``est`` on the point map ``p2p`` (as if the earlier phases had kept it)."""
     source, _, target, _ = unit_area_pair(sm, sn)
     pb = Problem(source, target, pair.source, pair.target, sm.k, None, None, None, est.k)
-    return est._check_turn(pb, Run(None, p2p, None), {}, source, symmetry)
+    return check_turn(est, pb, Run(None, p2p, None), {}, source, symmetry)
 
 
 @pytest.mark.parametrize("limb", ["leg", "arm"])

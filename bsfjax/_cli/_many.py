@@ -311,9 +311,10 @@ def cmd_transfer_many(args, error) -> int:
     return 1 if failed else 0
 
 
-#: Said of a target whose first map's labels missed source parts (no landmarks, no --partial).
+#: Said of a target whose first map's labels missed source parts (no --partial).
 ESTIMATED_AGAIN = ("the first map's labels missed source parts: its map was estimated again "
-                   "with the landmarks read off it guiding ZoomOut (as --partial)")
+                   "with the landmarks read off it guiding ZoomOut (as --partial; with given "
+                   "landmarks, from their map)")
 
 
 def _write_target(args, run: _Run, i: int, res, part_names, per_face: bool, error) -> dict:

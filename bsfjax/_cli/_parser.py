@@ -65,9 +65,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="without landmarks: estimate the map from one start, not 15 with a "
                         "choice by geodesic distortion (16x faster, less accurate)")
     p.add_argument("--partial", action="store_true",
-                   help="without landmarks, for a target that misses parts (a cut limb): the "
-                        "landmarks read off the first map also guide ZoomOut (slower; on clean "
-                        "pairs sometimes less accurate)")
+                   help="for a target that misses parts (a cut limb): the landmarks read off "
+                        "the first map also guide ZoomOut, and with --landmarks the turn check "
+                        "follows their map (slower; on clean pairs sometimes less accurate; "
+                        "the command does this by itself once a map misses source parts)")
     p.add_argument("--no-denoise", action="store_true",
                    help="use the meshes as they are (default: a noisy source or target is "
                         "smoothed before its spectrum, by Taubin iterations chosen from its "

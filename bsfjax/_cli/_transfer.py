@@ -35,6 +35,10 @@ def _parse_landmarks(text: str | None):
 PARTIAL_AGAIN = ("the target misses source parts and no landmarks were given: estimating its "
                  "map again with the landmarks read off the first one guiding ZoomOut "
                  "(--partial; landmarks on what it kept are better)")
+#: The same with landmarks: the turn check and the pairs read off the first map follow it.
+PARTIAL_AGAIN_LANDMARKS = ("the target misses source parts: estimating its map again, the "
+                           "landmarks read off the first one guiding ZoomOut and the turn "
+                           "check comparing left and right (as --partial)")
 
 
 def missing_line(values, result, src_prep, prep, per_face: bool, names=None) -> tuple:
@@ -199,7 +203,8 @@ def _transfer_one(args) -> int:
         # (a partial target: its first map may have slid a limb into the missing part)
         if n_gone and kind == "estimate" and estimates_again(
                 map_estimator(args, k, k_map), landmarks, source, target, k_map):
-            print(f"{line}\n{PARTIAL_AGAIN}", file=sys.stderr)
+            print(f"{line}\n{PARTIAL_AGAIN if landmarks is None else PARTIAL_AGAIN_LANDMARKS}",
+                  file=sys.stderr)
             est = _estimate_map(args, k, k_map, k_spec, sm, sn, landmarks, source, target, True,
                                 resume=est)  # (from the first estimate's kept start)
             C, p2p = est.C, est.p2p

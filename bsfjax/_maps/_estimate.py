@@ -30,7 +30,8 @@ class MapEstimate(NamedTuple):
     #: ``(source, target)`` [`Subsample`][bsfjax.Subsample] s ZoomOut ran on (``None``: every
     #: vertex); ``"refined"`` continues on them (``transfer_labels(..., samples=)``)
     samples: tuple | None = None
-    #: with several starts (no landmarks): the kept map's geodesic distortion
+    #: with several starts (no landmarks), or landmarks and ``derived_guidance`` (phases 3
+    #: and 4 after phase 1): the kept map's geodesic distortion
     #: ([`bsfjax.map_distortion`][bsfjax.map_distortion]) and orientation agreement
     #: ([`bsfjax.orientation_agreement`][bsfjax.orientation_agreement]), the start ``(k₀, WKS variance)`` chosen among
     #: them, and the landmark pairs read off its map when the estimate made with them was kept
@@ -40,7 +41,8 @@ class MapEstimate(NamedTuple):
     orientation: float | None = None
     start: tuple | None = None
     landmarks: tuple | None = None
-    #: with several starts and the turn check: whether the kept map is the alternative with
+    #: with phase 4, the turn check (several starts, or landmarks and ``derived_guidance``):
+    #: whether the kept map is the alternative with
     #: left and right swapped (the chosen map was turned front to back); ``None`` otherwise
     swapped: bool | None = None
     #: with the turn check: whether its two measures disagree about which of its two maps is

@@ -8,21 +8,19 @@ forms.
 
 from __future__ import annotations
 
-import dataclasses
-
 import equinox as eqx
 import numpy as np
 
 from ._distortion import DISTORTION_SAMPLES, ORIENTATION_SLACK, _agreements, _distortions
 from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pair_samples, \
     check_starts, check_symmetry, choice_key, choose_derived, choose_start, resumed_choice, \
-    to_given, turn_step
+    to_given
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
 from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable
 from ._proxy import needs_proxy, proxy_estimate
-from ._turn import LIMB_APART, check_sizes, descriptors, landmarks_from_map, selection_rows, \
-    self_map, turn_candidates, turn_choice, with_read_pairs
+from ._turn import LIMB_APART, check_sizes, check_turn, descriptors, landmarks_from_map, \
+    selection_rows, self_map, with_read_pairs
 from .._sampling import Subsample, subsample
 from .._spectral import Spectrum, unit_area_pair
 from .._util import (BSFError, check_int, check_real, check_source_mesh, on_one_blas_thread,
@@ -50,7 +48,8 @@ class MapEstimator(eqx.Module):
        ``zoomout_samples`` farthest-point samples of each shape; the point map is the nearest
        neighbour of each target row of ``Φ_N C`` among the rows of ``Φ_M``, and ``C`` the
        ``k × k`` map of that point map.  With landmarks (or without the meshes) this is all
-       (``added_landmarks``: once more, with pairs read off the map beside the given ones).
+       (``added_landmarks``: once more, with pairs read off the map beside the given ones;
+       ``derived_guidance`` between triangle meshes: phases 3 and 4 follow from its map).
     2. **The choice among starts** (no landmarks, with the meshes): every start of ``starts``
        (default ``landmark_free_starts``) runs phase 1; among the point maps whose
        orientation agreement ([`bsfjax.orientation_agreement`][bsfjax.orientation_agreement]) is
@@ -145,10 +144,12 @@ class MapEstimator(eqx.Module):
       --partial``).  For a target that misses parts (a cut limb) and has no landmarks: on
       the partial FAUST targets of docs/results/scans.md the labels came within 0.5–2.9
       points of the clean pairs on 9 of 9 (before: 84.2 % on average, 7–62 points lost on
-      the first cut).  Off by default: on clean pairs the choice sometimes keeps the guided
-      estimate where it is less accurate (its distortion and orientation both better): the
-      9 pairs of docs/results/segmentation.md without landmarks 95.04 → 94.66 %, FAUST_5k
-      000→010 93.92 → 90.11 %.
+      the first cut).  With landmarks, phases 3 and 4 follow phase 1 (the command's second
+      estimate of a target that misses parts): 9 FAUST targets cut three ways, with their
+      3–4 kept landmarks, 93.93 → 94.38 % on average.  Off by default: on clean pairs the
+      choice sometimes keeps the guided estimate where it is less accurate (its distortion
+      and orientation both better): the 9 pairs of docs/results/segmentation.md without
+      landmarks 95.04 → 94.66 %, FAUST_5k 000→010 93.92 → 90.11 %.
     - `derived_landmarks`: landmark pairs of phase 3 (20; 0: no phase 3).  SMPL-part accuracy
       of the pull-back on the 9 pairs: 92.57 % with none, 94.40 % with 10, 94.47 % with 20
       (94.46 % with 5 true landmarks).
@@ -309,7 +310,10 @@ class MapEstimator(eqx.Module):
                        subsample(target_mesh, self.zoomout_samples))
         # several starts on a large target: the candidates' point maps are searched only where
         # they are compared, and the kept one over every vertex at the end
-        rows, faces = selection_rows(self, target_mesh) if len(starts) > 1 else (None, None)
+        later = lm is not None and self.derived_guidance and guidable(source_mesh, target_mesh,
+                                                                      self)
+        rows, faces = selection_rows(self, target_mesh) if len(starts) > 1 or later else \
+            (None, None)
         pb = Problem(source, target, source_mesh, target_mesh, refine_to, samples, rows, faces,
                      max(k0 for k0, _ in starts + (single,)), masses, guided_to)
         choice = None
@@ -324,7 +328,10 @@ class MapEstimator(eqx.Module):
             run, quality = self._later_phases(pb, run, quality, source_given, source_symmetry)
         else:
             run, quality = self._estimate(pb, starts[0], lm, guide=self.landmark_guidance), {}
-            if lm is not None and self.added_landmarks and pb.meshes:  # (again, with more)
+            if later:  # (a target that misses parts: phases 3 and 4 from the landmarks' map)
+                run, quality = self._later_phases(pb, *self._rated(pb, run, {}), source_given,
+                                                  source_symmetry)
+            elif lm is not None and self.added_landmarks and pb.meshes:  # (again, with more)
                 both, read = with_read_pairs(lm, pb.source_mesh, run.p2p, self.added_landmarks)
                 run = self._estimate(pb, starts[0], both, guide=self.landmark_guidance)
                 quality = dict(landmarks=read)
@@ -415,7 +422,10 @@ class MapEstimator(eqx.Module):
 
     def _grow_again(self, pb: Problem, run: Run, quality: dict) -> tuple:
         """The kept run grown again from its ``C0`` at ``zoomout_step``, its quality anew."""
-        run = self._grow(pb, run.C0, *run.grown)
+        return self._rated(pb, self._grow(pb, run.C0, *run.grown), quality)
+
+    def _rated(self, pb: Problem, run: Run, quality: dict) -> tuple:
+        """``run`` and ``quality`` with its distortion and orientation agreement."""
         orient = _agreements(pb.source_mesh, pb.target_mesh, run.p2p[None], pb.faces)
         return run, dict(quality, distortion=float(self._distortion(pb, run.p2p)[0]),
                          orientation=float(orient[0]))
@@ -460,33 +470,10 @@ class MapEstimator(eqx.Module):
             kept, q, trusted = (choose_derived(self, run, quality, found, dist, orient, trust)
                                 if self.derived_landmarks else (run, quality, False))
             if self.turn_check:
-                kept, q = self._check_turn(pb, kept, q, source_given, source_symmetry)
+                kept, q = check_turn(self, pb, kept, q, source_given, source_symmetry)
                 if trusted and q.get("turn_doubtful"):  # (the distortion's pick instead)
                     continue
             return kept, q
-
-    def _check_turn(self, pb: Problem, run: Run, quality: dict, source_given: Spectrum,
-                    source_symmetry) -> tuple:
-        """Phase 4: the alternatives with left and right swapped, one kept if preferred."""
-        if turn_step(self) != self.zoomout_step:  # (the maps at turn_step; a swap regrown)
-            at = dataclasses.replace(self, zoomout_step=turn_step(self), turn_step=None)
-            turned, q = at._check_turn(pb, *at._grow_again(pb, run, quality), source_given,
-                                       source_symmetry)  # (not swapped: the run as it came)
-            return self._grow_again(pb, turned, q) if q.get("swapped") else (run, dict(
-                q, distortion=quality["distortion"], orientation=quality["orientation"]))
-        joint = self.turn_candidates == "limbs"
-        runs, kept_sets, turn = turn_candidates(self, pb, run, quality, source_given,
-                                                source_symmetry, joint)
-        quality = dict(quality, swapped=False)
-        choice = turn_choice(self, pb, runs, joint, turn)
-        if choice is None:  # (a target too coarse for the local distortion keeps the map)
-            return run, quality
-        pick, doubtful, orient = choice
-        quality.update(swapped=pick != 0, turn_doubtful=doubtful)
-        if pick:
-            quality.update(landmarks=kept_sets[pick], orientation=float(orient[pick]),
-                           distortion=float(self._distortion(pb, runs[pick].p2p)[0]))
-        return runs[pick], quality
 
     def _result(self, pb: Problem, run: Run, am, an, quality: dict) -> MapEstimate:
         """The kept run as a [`MapEstimate`][bsfjax.MapEstimate] in the given bases (its point

@@ -147,21 +147,23 @@ def guidable(source_mesh, target_mesh, estimator) -> bool:
 def estimates_again(estimator, landmarks, source_mesh, target_mesh, refine_to: int) -> bool:
     """Whether a target whose labels miss source parts gets its map estimated again with
     ``derived_guidance`` (``bsfjax transfer``, [`transfer_collection`][bsfjax.transfer_collection]):
-    only where that second estimate can differ from the first, that is without
-    ``landmarks``, from several starts (phases 3 and 4, where the derived pairs guide, run
-    only after a choice among starts; ``refine_to``: the size that keeps a start), with
-    ``derived_guidance`` still off, the guidance on and both shapes triangle meshes
-    (`guidable`; a point cloud's estimate is never guided).  Anything else would pay a
-    second estimate that returns the first map."""
+    only where that second estimate can differ from the first, that is with phases 3 or 4
+    (the derived pairs, the turn check) on, ``derived_guidance`` still off, the guidance on
+    and both shapes triangle meshes (`guidable`; a point cloud's estimate is never guided);
+    and without ``landmarks``, from several starts (phases 3 and 4 run only after a choice
+    among starts; ``refine_to``: the size that keeps a start).  With landmarks they run
+    after phase 1.  Anything else would pay a second estimate that returns the first map."""
     from ._estimate import check_starts
 
-    if landmarks is not None or estimator.derived_guidance:
+    if estimator.derived_guidance or not (estimator.derived_landmarks or estimator.turn_check):
         return False
-    if not (estimator.derived_landmarks or estimator.turn_check):
+    if not guidable(source_mesh, target_mesh, estimator):
         return False
+    if landmarks is not None:
+        return True
     single = (estimator.k, estimator.wks_variance)
     starts = check_starts(estimator.starts, refine_to, (single,), estimator.landmark_free_starts)
-    return len(starts) > 1 and guidable(source_mesh, target_mesh, estimator)
+    return len(starts) > 1
 
 
 def landmark_geodesics(source_mesh, target_mesh, landmarks, masses,

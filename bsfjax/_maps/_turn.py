@@ -1,6 +1,7 @@
 """The pieces [`MapEstimator`][bsfjax.MapEstimator] shares between its phases and its turn check: a
 shape's intrinsic mirror symmetry, landmark pairs read off a point map, where candidate maps
-are compared on a large target, and the descriptors of one start.
+are compared on a large target, and the descriptors of one start; and the turn check itself
+(`check_turn`, phase 4).
 
 Each function takes the estimator (its fields) as its first argument; the estimator's own
 methods ([`MapEstimator.mirror_symmetry`][bsfjax.MapEstimator.mirror_symmetry]) check the inputs first.
@@ -257,3 +258,28 @@ def turn_choice(est, pb, runs: list, joint: bool, turn: list):
     score = local * est._distortion(pb, maps) if joint else local
     pick = choose_map(score, orient, slack=est.orientation_slack)
     return pick, measures_disagree(est, score, orient, pick, turn), orient
+
+
+def check_turn(est, pb, run, quality: dict, source_given: Spectrum,
+               source_symmetry) -> tuple:
+    """Phase 4 of ``est`` (a [`MapEstimator`][bsfjax.MapEstimator]): the alternatives of
+    ``run`` with left and right swapped, one kept if preferred; ``(run, quality)``."""
+    if turn_step(est) != est.zoomout_step:  # (the maps at turn_step; a swap regrown)
+        at = dataclasses.replace(est, zoomout_step=turn_step(est), turn_step=None)
+        turned, q = check_turn(at, pb, *at._grow_again(pb, run, quality), source_given,
+                               source_symmetry)  # (not swapped: the run as it came)
+        return est._grow_again(pb, turned, q) if q.get("swapped") else (run, dict(
+            q, distortion=quality["distortion"], orientation=quality["orientation"]))
+    joint = est.turn_candidates == "limbs"
+    runs, kept_sets, turn = turn_candidates(est, pb, run, quality, source_given,
+                                            source_symmetry, joint)
+    quality = dict(quality, swapped=False)
+    choice = turn_choice(est, pb, runs, joint, turn)
+    if choice is None:  # (a target too coarse for the local distortion keeps the map)
+        return run, quality
+    pick, doubtful, orient = choice
+    quality.update(swapped=pick != 0, turn_doubtful=doubtful)
+    if pick:
+        quality.update(landmarks=kept_sets[pick], orientation=float(orient[pick]),
+                       distortion=float(est._distortion(pb, runs[pick].p2p)[0]))
+    return runs[pick], quality

@@ -10,8 +10,9 @@ the transfer; `bsfjax._pipeline._stages`).  A target **without landmarks** gets
 [`bsfjax.estimate_map`][bsfjax.estimate_map]'s own point map, computed on the host with the target's other host
 work: its choice among several starts by geodesic distortion and orientation is Dijkstra and
 numpy, not a jitted stage; the problem stage (for the map's energy) and the transfer stage then
-run on it as for any other target.  With the single start ``starts=((k, wks_variance),)`` (``bsfjax transfer
---one-start``) such a target runs through the three stages like the others.
+run on it as for any other target; so does one with landmarks estimated again (phases 3
+and 4 after the landmarks' map).  With the single start ``starts=((k, wks_variance),)``
+(``bsfjax transfer --one-start``) such a target runs through the three stages like the others.
 
 - **size buckets**: a target of ``n`` vertices (``m`` faces) is padded to the bucket size
   ``size_bucket(n)`` (``size_bucket(m)``): extra vertices have zero mass and zero eigenvector
@@ -46,15 +47,13 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from .._util import BUCKET_FACTORS, merge_buckets, size_bucket
+from .._util import BUCKET_FACTORS, BSFError, merge_buckets, size_bucket
 from ._arrays import cast_tree, item_arrays
 from ._stages import StageConfig, capped_batch, dispatch_stages, stages_for
-from .._util import BSFError
-from .._maps import face_geometry
-from .._maps import default_chunk
 from ._mesh_level import _decide_labels, _split_label_kwargs
-from .._maps import (MapEstimate, MapEstimator, check_starts, estimate_size, estimates_again,
-                     for_point_clouds, guidable, landmark_geodesics, with_read_pairs)
+from .._maps import (REFINE_EIGENPAIRS, MapEstimate, MapEstimator, check_starts, default_chunk,
+                     estimate_size, estimates_again, face_geometry, for_point_clouds, guidable,
+                     landmark_geodesics, with_read_pairs)
 from ._face_labels import decide_face_labels, face_label_shares
 from ._collection_rows import (SourceSymmetry, TargetTransfer, body_result, collection_estimator,
                                file_row_results, landmark_lookup, missing_parts, on_body,
@@ -64,7 +63,6 @@ from .._mesh import (HoleFill, MainBody, Mesh, as_mesh, as_strength, is_mesh_lik
                      prepare_scan, surface_for_map)
 from .._transfer import (BSF, GeodesicBalls, SaturatedHeat, as_method, method_for_shapes,
                          method_name)
-from .._maps import REFINE_EIGENPAIRS
 from .._sampling import Subsample, subsample
 from .._spectral import Spectrum, map_to_unit_area, spectrum, unit_area, unit_area_pair
 from .._util import eigensolve_on_one_thread, one_blas_thread
@@ -99,7 +97,8 @@ class _Target(NamedTuple):
     fill: HoleFill | None = None  # the holes closed for its spectrum (`mesh` has them)
     guide: tuple | None = None  # with landmarks: ZoomOut's guidance (landmark_geodesics)
     again: bool = False  # this is a second estimate (estimates_again)
-    first: MapEstimate | None = None  # its first estimate where it may get a second, to resume
+    may: bool = False  # it may get a second estimate (estimates_again)
+    first: MapEstimate | None = None  # its first estimate from several starts, to resume
     step: int = 2  # ZoomOut's eigenpairs per iteration (for_point_clouds: more on a cloud)
     method: object = None  # its transfer's (method_for_shapes: a cloud's options)
 
@@ -229,8 +228,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
       from each mesh (none on a clean mesh); the labels are on the original vertices, and
       each result's ``denoise_iterations`` and ``mesh`` (as read) say what was done.
       ``False``: the meshes as given; an integer: that many Taubin iterations on every mesh.
-    - `estimate_again`: labels, targets without landmarks (several starts, two triangle
-      meshes): a target whose labels miss source parts (``missing``: a partial target,
+    - `estimate_again`: labels, two triangle meshes (without landmarks: several starts;
+      with them, phases 3 and 4 after their map): a target whose labels miss source parts (``missing``: a partial target,
       whose first map may have slid a limb into the missing part) has its map estimated
       again with the estimator's ``derived_guidance`` on, as ``bsfjax transfer`` does, and
       yields that result (``estimated_again``; ``True``, default).  ``False``: one estimate
@@ -350,9 +349,10 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 src_spec, spec, lm, source_mesh=src_geometry, target_mesh=mesh,
                 samples=None if sub is None else (sub_m, sub))
             lm = with_read_pairs(lm, src_geometry, first.p2p, this.added_landmarks)[0]
-        est = None
-        if lm is None and not one_start:  # the choice among starts: the estimator's own map
-            est = this(src_spec, spec, source_mesh=src_geometry, target_mesh=mesh,
+        est = None  # the estimator's own map: its choice among starts, or with landmarks its
+        if (lm is None and not one_start) or (  # phases 3 and 4 (derived_guidance, MapEstimator)
+                lm is not None and this.derived_guidance and guidable(source, mesh, this)):
+            est = this(src_spec, spec, lm, source_mesh=src_geometry, target_mesh=mesh,
                        samples=None if sub is None else (sub_m, sub),
                        source_symmetry=source_symmetry(this),
                        resume=firsts.pop(i, None) if again else None)
@@ -362,7 +362,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
         return _Target(i, mesh, scaled, (am, an), lm, sub, time.perf_counter() - t,
                        None if est is None else est.p2p,
                        None if est is None else est.turn_doubtful, parts, n_it, prep.fill,
-                       guide, bool(again), est if may else None,  # (again: may is False)
+                       guide, bool(again), may, est if may else None,  # (again: not may)
                        this.zoomout_step, as_method(method_for_shapes(named, source, prep.mesh)))
 
     devices = jax.local_devices()
@@ -438,7 +438,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
             if labels:
                 res = res._replace(missing=missing_parts(res, body_vals, src_prep.body, faces),
                                    estimated_again=tg.again)
-                if res.missing and tg.first is not None and retry is not None:
+                if res.missing and tg.may and retry is not None:
                     retry[tg.index] = res.seconds  # (a partial target: its map again)
                     firsts[tg.index] = tg.first
                     continue
