@@ -546,7 +546,7 @@ def test_keep_derived_keeps_the_derived_estimate_unless_the_turn_check_doubts_it
     whenever its orientation agreement is within the slack, whatever the distortions; where
     that changed the pick and the turn check is then doubtful, phases 3 and 4 run again by the
     distortion: the result of ``keep_derived=False``."""
-    from bsfjax._maps import _estimator
+    from bsfjax._maps import _turn
 
     pair, sm, sn = small_pair
     meshes = dict(source_mesh=pair.source, target_mesh=pair.target)
@@ -569,7 +569,7 @@ def test_keep_derived_keeps_the_derived_estimate_unless_the_turn_check_doubts_it
     # the turn check doubtful (its choice made to keep the map it is given, in doubt): the
     # distortion's pick, as without the option; not doubtful: the derived estimate stays
     for doubt in (True, False):
-        monkeypatch.setattr(_estimator, "turn_choice",
+        monkeypatch.setattr(_turn, "turn_choice",  # (phase 4: _turn.check_turn)
                             lambda est, pb, runs, joint, turn: (0, doubt, np.ones(len(runs))))
         est = {c: MapEstimator(**kw, keep_derived=c)(sm, sn, **meshes) for c in (False, True)}
         assert est[True].turn_doubtful is doubt and est[True].swapped is False
