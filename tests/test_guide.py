@@ -202,9 +202,9 @@ def test_landmarks_and_derived_guidance_go_on_from_the_landmarks_map(small_pair,
     seen = []
     real = bj.MapEstimator._later_phases
 
-    def spy(self, pb, run, quality, *rest):
-        seen.append((run.p2p.copy(), dict(quality)))
-        seen.append(real(self, pb, run, quality, *rest))
+    def spy(self, pb, run, quality, *rest, **kw):
+        seen.append((run.p2p.copy(), dict(quality), kw))
+        seen.append(real(self, pb, run, quality, *rest, **kw))
         return seen[-1]
 
     monkeypatch.setattr(bj.MapEstimator, "_later_phases", spy)
@@ -212,7 +212,8 @@ def test_landmarks_and_derived_guidance_go_on_from_the_landmarks_map(small_pair,
     plain = est(sm, sn, lm, **kw)
     assert not seen and plain.distortion is None and plain.swapped is None
     got = dataclasses.replace(est, derived_guidance=True)(sm, sn, lm, **kw)
-    (start, measured), (kept, quality) = seen
+    (start, measured, options), (kept, quality) = seen
+    assert options == {"given": True}  # (phase 3 then prefers its guided estimate)
     np.testing.assert_array_equal(start, plain.p2p)
     distortion = bj.map_distortion(ex.source, ex.target, plain.p2p, fit_scale=True)
     np.testing.assert_allclose(measured["distortion"], distortion, rtol=1e-6)

@@ -512,7 +512,8 @@ def test_turn_step_grows_the_turn_checks_maps_at_its_step_and_the_kept_one_at_zo
 
 def test_choose_derived_closed_form():
     """Phase 3's choice: by ``choose_map`` (distortion within the orientation slack), or with
-    ``trust`` the first derived estimate within the slack of the best orientation."""
+    ``trust`` the first derived estimate within the slack of the best orientation, or the
+    preferred one (``prefer``) within ``GUIDED_SLACK`` of the least distortion."""
     from bsfjax._maps._estimate import choose_derived
 
     est = MapEstimator()
@@ -535,6 +536,22 @@ def test_choose_derived_closed_form():
     assert choose_derived(est, "run", q, found, dist, orient, True)[1:] == \
         choose_derived(est, "run", q, found, dist, orient, False)[1:]
     assert choose_derived(est, "run", q, found, dist, orient, True)[0] == "run a"
+    # ``prefer`` (with given landmarks, the guided estimate): kept within GUIDED_SLACK of the
+    # least distortion and the orientation slack, else the choice as without it
+    from bsfjax._maps._estimate import GUIDED_SLACK
+
+    orient = [0.90, 0.90, 0.90]
+    for d2, want in ((0.03 * (1 + GUIDED_SLACK) * 0.999, "run b"),
+                     (0.03 * (1 + GUIDED_SLACK) * 1.001, "run")):
+        dist = [0.03, 0.05, d2]
+        assert choose_derived(est, "run", q, found, dist, orient, False, prefer=2)[0] == want
+    dist = [0.03, 0.05, 0.03]
+    assert choose_derived(est, "run", q, found, dist, [0.90, 0.90, 0.90 - slack - 0.01],
+                          False, prefer=2)[0] == "run"
+    # (over a derived estimate of less distortion too, and reported as kept)
+    run, quality, _ = choose_derived(est, "run", q, found, [0.04, 0.03, 0.031], orient, False,
+                                     prefer=2)
+    assert (run, quality["landmarks"], quality["distortion"]) == ("run b", "pairs b", 0.031)
     with pytest.raises(ValueError, match="keep_derived must be True or False"):
         MapEstimator(keep_derived=1)
 

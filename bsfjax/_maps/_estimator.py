@@ -146,7 +146,7 @@ class MapEstimator(eqx.Module):
       points of the clean pairs on 9 of 9 (before: 84.2 % on average, 7–62 points lost on
       the first cut).  With landmarks, phases 3 and 4 follow phase 1 (the command's second
       estimate of a target that misses parts): 9 FAUST targets cut three ways, with their
-      3–4 kept landmarks, 93.93 → 94.38 % on average.  Off by default: on clean pairs the
+      3–4 kept landmarks, 93.93 → 94.66 % on average.  Off by default: on clean pairs the
       choice sometimes keeps the guided estimate where it is less accurate (its distortion
       and orientation both better): the 9 pairs of docs/results/segmentation.md without
       landmarks 95.04 → 94.66 %, FAUST_5k 000→010 93.92 → 90.11 %.
@@ -330,7 +330,7 @@ class MapEstimator(eqx.Module):
             run, quality = self._estimate(pb, starts[0], lm, guide=self.landmark_guidance), {}
             if later:  # (a target that misses parts: phases 3 and 4 from the landmarks' map)
                 run, quality = self._later_phases(pb, *self._rated(pb, run, {}), source_given,
-                                                  source_symmetry)
+                                                  source_symmetry, given=True)
             elif lm is not None and self.added_landmarks and pb.meshes:  # (again, with more)
                 both, read = with_read_pairs(lm, pb.source_mesh, run.p2p, self.added_landmarks)
                 run = self._estimate(pb, starts[0], both, guide=self.landmark_guidance)
@@ -456,18 +456,22 @@ class MapEstimator(eqx.Module):
                 for g in guides]
 
     def _later_phases(self, pb: Problem, run: Run, quality: dict, source_given: Spectrum,
-                      source_symmetry) -> tuple:
-        """Phases 3 and 4 from the kept start's run; with ``keep_derived``, phase 3's choice
-        once more without it (the same derived estimates) where it changed the pick and the
-        turn check was doubtful."""
+                      source_symmetry, given: bool = False) -> tuple:
+        """Phases 3 and 4 from the kept start's run (``given``: the given landmarks'; phase 3
+        then prefers its guided estimate, `GUIDED_SLACK`); with ``keep_derived``, phase 3's
+        choice once more without it where it changed the pick and phase 4 was doubtful."""
+        prefer = None
         if self.derived_landmarks:
             found = self._derived(pb, run.p2p)
+            guided = [i for i, (_, r) in enumerate(found, 1) if r.grown[1]]
+            prefer = guided[0] if given and guided else None
             maps = np.stack([r.p2p for _, r in found])
             dist = [quality["distortion"], *map(float, self._distortion(pb, maps))]
             orient = [quality["orientation"], *map(float, _agreements(
                 pb.source_mesh, pb.target_mesh, maps, pb.faces))]
         for trust in dict.fromkeys((self.keep_derived, False)):
-            kept, q, trusted = (choose_derived(self, run, quality, found, dist, orient, trust)
+            kept, q, trusted = (choose_derived(self, run, quality, found, dist, orient, trust,
+                                               prefer)
                                 if self.derived_landmarks else (run, quality, False))
             if self.turn_check:
                 kept, q = check_turn(self, pb, kept, q, source_given, source_symmetry)
