@@ -7,7 +7,8 @@ import pytest
 
 import bsfjax as bj
 from bsfjax._maps._fmap import _from_p2p, _size_schedule, _zoomout_jit
-from bsfjax._maps._guide import (CLOUD_ADDED_LANDMARKS, CLOUD_ZOOMOUT_STEP, estimates_again, for_point_clouds,
+from bsfjax._maps._guide import (CLOUD_ADDED_LANDMARKS, CLOUD_ZOOMOUT_STEP, estimates_again,
+                                 follows_landmarks, for_point_clouds,
                                  guided_search)
 from bsfjax.internal import estimate_size, guided_zoomout, landmark_geodesics, vertex_areas
 from bsfjax._maps._turn import LIMB_APART
@@ -177,6 +178,11 @@ def test_a_second_estimate_only_where_it_can_differ(sphere_mesh):
                   est.__class__(derived_landmarks=0, turn_check=False)):
         assert not estimates_again(other, lm, m, m, 60)
     assert not estimates_again(est, lm, m, cloud, 60)
+    # the second estimate's estimator then runs phases 3 and 4 after the landmarks' map
+    again = est.__class__(derived_guidance=True)
+    assert follows_landmarks(again, lm, m, m)
+    assert not follows_landmarks(est, lm, m, m) and not follows_landmarks(again, None, m, m)
+    assert not follows_landmarks(again, lm, m, cloud)
     assert not estimates_again(est.__class__(derived_guidance=True), None, m, m, 60)
     assert not estimates_again(est.__class__(starts=((30, 7.0),)), None, m, m, 60)
     assert not estimates_again(est.__class__(landmark_guidance=0.0), None, m, m, 60)

@@ -23,7 +23,8 @@ from ._fmap import (
     nearest_neighbors, zoomout,
 )
 from ._guide import (CLOUD_ZOOMOUT_STEP, DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_size,
-                     estimates_again, for_point_clouds, guidable, guided_zoomout,
+                     estimates_again, follows_landmarks, for_point_clouds, guidable,
+                     guided_zoomout,
                      landmark_geodesics, turn_mirror_size)
 from ._orientation import OrientationBasis, face_geometry, orientation_bases
 from ._turn import with_read_pairs
@@ -36,7 +37,8 @@ __all__ = [
     "CLOUD_ZOOMOUT_STEP", "COVERAGE_SMOOTHING", "DERIVED_GUIDANCE", "FmapWeights", "GUIDE_WEIGHT", "MapEstimate", "MapEstimator", "OrientationBasis", "REFINE_EIGENPAIRS",
     "StageConfig", "check_fmap_memory", "check_landmark_pairs", "check_options", "check_samples",
     "check_starts", "choose_map", "chunk_for", "default_chunk", "estimate_fmap", "estimate_map",
-    "estimate_size", "estimates_again", "guidable", "guided_zoomout", "landmark_geodesics",
+    "estimate_size", "estimates_again", "follows_landmarks", "guidable", "guided_zoomout",
+    "landmark_geodesics",
     "face_geometry", "fmap_energy", "fmap_from_p2p", "fmap_to_p2p", "hks", "hks_times",
     "icp_refine", "map_coverage", "map_distortion", "map_stage", "mirror_symmetry", "nearest_neighbors",
     "orientation_agreement", "orientation_bases", "point_map_stage", "problem_stage",

@@ -17,7 +17,8 @@ from ._estimate import MapEstimate, Problem, Run, check_landmark_pairs, check_pa
     to_given
 from ._estimation import FmapWeights, check_fmap_memory, estimate_fmap
 from ._fmap import fmap_from_p2p, fmap_to_p2p, zoomout
-from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, guidable
+from ._guide import DERIVED_GUIDANCE, GUIDE_WEIGHT, estimate_zoomout, follows_landmarks, \
+    guidable
 from ._proxy import needs_proxy, proxy_estimate
 from ._turn import LIMB_APART, check_sizes, check_turn, descriptors, landmarks_from_map, \
     selection_rows, self_map, with_read_pairs
@@ -310,8 +311,7 @@ class MapEstimator(eqx.Module):
                        subsample(target_mesh, self.zoomout_samples))
         # several starts on a large target: the candidates' point maps are searched only where
         # they are compared, and the kept one over every vertex at the end
-        later = lm is not None and self.derived_guidance and guidable(source_mesh, target_mesh,
-                                                                      self)
+        later = follows_landmarks(self, lm, source_mesh, target_mesh)
         rows, faces = selection_rows(self, target_mesh) if len(starts) > 1 or later else \
             (None, None)
         pb = Problem(source, target, source_mesh, target_mesh, refine_to, samples, rows, faces,

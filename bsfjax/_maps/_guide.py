@@ -144,6 +144,15 @@ def guidable(source_mesh, target_mesh, estimator) -> bool:
         for m in (source_mesh, target_mesh))
 
 
+def follows_landmarks(estimator, landmarks, source_mesh, target_mesh) -> bool:
+    """Whether [`MapEstimator`][bsfjax.MapEstimator] runs phases 3 and 4 after the map of
+    these ``landmarks`` (a second estimate of a target that misses parts): with
+    ``derived_guidance``, between two triangle meshes that the guidance runs on
+    (`guidable`)."""
+    return (landmarks is not None and bool(estimator.derived_guidance)
+            and guidable(source_mesh, target_mesh, estimator))
+
+
 def estimates_again(estimator, landmarks, source_mesh, target_mesh, refine_to: int) -> bool:
     """Whether a target whose labels miss source parts gets its map estimated again with
     ``derived_guidance`` (``bsfjax transfer``, [`transfer_collection`][bsfjax.transfer_collection]):

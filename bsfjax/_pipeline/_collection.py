@@ -52,8 +52,8 @@ from ._arrays import cast_tree, item_arrays
 from ._stages import StageConfig, capped_batch, dispatch_stages, stages_for
 from ._mesh_level import _decide_labels, _split_label_kwargs
 from .._maps import (REFINE_EIGENPAIRS, MapEstimate, MapEstimator, check_starts, default_chunk,
-                     estimate_size, estimates_again, face_geometry, for_point_clouds, guidable,
-                     landmark_geodesics, with_read_pairs)
+                     estimate_size, estimates_again, face_geometry, follows_landmarks,
+                     for_point_clouds, guidable, landmark_geodesics, with_read_pairs)
 from ._face_labels import decide_face_labels, face_label_shares
 from ._collection_rows import (SourceSymmetry, TargetTransfer, body_result, collection_estimator,
                                file_row_results, landmark_lookup, missing_parts, on_body,
@@ -229,11 +229,12 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
       each result's ``denoise_iterations`` and ``mesh`` (as read) say what was done.
       ``False``: the meshes as given; an integer: that many Taubin iterations on every mesh.
     - `estimate_again`: labels, two triangle meshes (without landmarks: several starts;
-      with them, phases 3 and 4 after their map): a target whose labels miss source parts (``missing``: a partial target,
-      whose first map may have slid a limb into the missing part) has its map estimated
-      again with the estimator's ``derived_guidance`` on, as ``bsfjax transfer`` does, and
-      yields that result (``estimated_again``; ``True``, default).  ``False``: one estimate
-      each (an estimator with ``derived_guidance`` runs it on every target from the start).
+      with them, phases 3 and 4 after their map): a target whose labels miss source parts
+      (``missing``: a partial target, whose first map may have slid a limb into the missing
+      part) has its map estimated again with the estimator's ``derived_guidance`` on, as
+      ``bsfjax transfer`` does, and yields that result (``estimated_again``; ``True``,
+      default).  ``False``: one estimate each (an estimator with ``derived_guidance`` runs
+      it on every target from the start).
     - `pad`: pad vertex and face counts to `size_bucket` sizes, merged for a
       collection of at most 64 targets (module doc; ``False``: one compilation per distinct
       count).
@@ -349,9 +350,8 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 src_spec, spec, lm, source_mesh=src_geometry, target_mesh=mesh,
                 samples=None if sub is None else (sub_m, sub))
             lm = with_read_pairs(lm, src_geometry, first.p2p, this.added_landmarks)[0]
-        est = None  # the estimator's own map: its choice among starts, or with landmarks its
-        if (lm is None and not one_start) or (  # phases 3 and 4 (derived_guidance, MapEstimator)
-                lm is not None and this.derived_guidance and guidable(source, mesh, this)):
+        est = None  # the estimator's own map: its choice among starts, or its phases 3 and 4
+        if (lm is None and not one_start) or follows_landmarks(this, lm, source, mesh):
             est = this(src_spec, spec, lm, source_mesh=src_geometry, target_mesh=mesh,
                        samples=None if sub is None else (sub_m, sub),
                        source_symmetry=source_symmetry(this),

@@ -57,8 +57,8 @@ class TargetTransfer(NamedTuple):
     #: the vertices its hole patches added for the spectrum (dropped from every result)
     filled_vertices: int = 0
     #: labels: the first map's labels missed source parts (``missing`` non-empty), so this
-    #: map was estimated again with ``derived_guidance`` (a partial
-    #: target; ``transfer_collection``'s ``estimate_again``); ``missing`` is then the second's
+    #: map was estimated again with ``derived_guidance`` (a partial target;
+    #: ``transfer_collection``'s ``estimate_again``); ``missing`` is then the second's
     estimated_again: bool = False
 
 
