@@ -564,18 +564,23 @@ def ceiling_table(rows, clean: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def ceiling_main(doc: str, run, clean: str, note: str) -> None:
+def ceiling_main(doc: str, run, clean: str, note: str, seed: bool = False) -> None:
     """A ceiling benchmark's command line: ``--out`` (Markdown, and its rows as JSON
-    beside it), ``--data``, ``--pairs``; ``run(data, folder, pairs)`` gives the rows."""
+    beside it), ``--data``, ``--pairs`` and, with ``seed``, ``--seed``; ``run(data, folder,
+    pairs)`` (``run(data, folder, pairs, seed)``) gives the rows."""
     ap = parser(doc)
     add_out(ap, help="output Markdown file (a .json of the rows beside it)")
     add_data(ap)
     ap.add_argument("--pairs", default="0-10,1-11,2-12",
                     help="source-target registration numbers (default 0-10,1-11,2-12)")
+    if seed:
+        ap.add_argument("--seed", type=int, default=0,
+                        help="the target's draw (default 0; the suite's draw D takes 2D, 2D + 1)")
     args = ap.parse_args()
     require_data(Path(args.data) / "faust", Path(args.data) / SMPL_SEGMENTATION)
     with tempfile.TemporaryDirectory() as tmp:
-        rows = run(Path(args.data), Path(tmp), pair_list(args.pairs))
+        rest = (args.seed,) if seed else ()
+        rows = run(Path(args.data), Path(tmp), pair_list(args.pairs), *rest)
     text = ceiling_table(rows, clean) + f"\n{short_machine()}; {note}\n"
     print(text)
     write_text(args.out, text)
