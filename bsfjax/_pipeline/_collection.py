@@ -351,7 +351,7 @@ def transfer_collection(source: Mesh | str, values, targets: Iterable, *, labels
                 samples=None if sub is None else (sub_m, sub))
             lm = with_read_pairs(lm, src_geometry, first.p2p, this.added_landmarks)[0]
         est = None  # the estimator's own map: its choice among starts, or its phases 3 and 4
-        if (lm is None and not one_start) or follows_landmarks(this, lm, source, mesh):
+        if (lm is None and not one_start) or follows_landmarks(this, lm, src_geometry, mesh):
             est = this(src_spec, spec, lm, source_mesh=src_geometry, target_mesh=mesh,
                        samples=None if sub is None else (sub_m, sub),
                        source_symmetry=source_symmetry(this),
